@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Sets up lunar_drake on a fresh machine (first call) and runs it.
+#   ./lunar.sh run [lunar-drake run options]   the default mission, headless
+#   ./lunar.sh test [pytest options]           the test suite (and ruff)
+#   ./lunar.sh setup                           set-up only
+#   ./lunar.sh <anything else>                 runs `lunar-drake <anything else>`
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+cd "$here"
+venv="$here/.venv"
+py="${PYTHON:-python3}"
+
+system_deps() {
+  # open3d's wheel links libusb-1.0 (and libgomp); Debian/Ubuntu names below.
+  if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+    local sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    echo "lunar.sh: installing system library libusb-1.0-0 (needed by open3d)" >&2
+    $sudo apt-get update -qq >/dev/null 2>&1 || true
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libusb-1.0-0 libgomp1 >/dev/null
+  fi
+}
+
+python_deps() {
+  local stamp="$venv/.lunar_drake-installed"
+  local want
+  want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+  if [ ! -x "$venv/bin/python" ]; then
+    "$py" -m venv "$venv"
+  fi
+  if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+    echo "lunar.sh: installing Python dependencies into .venv (first run takes a few minutes)" >&2
+    "$venv/bin/python" -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+    "$venv/bin/python" -m pip install -q -e ".[dev]"
+    echo "$want" > "$stamp"
+  fi
+}
+
+setup() { system_deps; python_deps; }
+
+cmd="${1:-run}"
+[ $# -gt 0 ] && shift
+case "$cmd" in
+  setup) setup ;;
+  run) setup; exec "$venv/bin/lunar-drake" run "$@" ;;
+  test)
+    setup
+    "$venv/bin/ruff" check lunar_drake tests benchmarks
+    exec "$venv/bin/python" -m pytest -q "$@" ;;
+  *) setup; exec "$venv/bin/lunar-drake" "$cmd" "$@" ;;
+esac

@@ -1,0 +1,219 @@
+"""The ``lunar-drake`` command.
+
+lunar-drake run [--scenario NAME|FILE[:NAME]] [--scenario-text YAML] [--duration S]
+                [--out DIR] [--no-meshcat] [--wait]
+lunar-drake terrain synth --size N --resolution M --seed S --out DIR [...]
+lunar-drake scenarios [FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from lunar_drake.errors import ConfigError, LunarDrakeError
+
+
+def _split_scenario(arg: str):
+    """'default' -> (None, 'default'); 'f.yaml' -> (f.yaml, 'default'); 'f.yaml:x' -> (f, x)."""
+    if arg.endswith((".yaml", ".yml")):
+        return arg, "default"
+    if ":" in arg and arg.split(":", 1)[0].endswith((".yaml", ".yml")):
+        f, name = arg.rsplit(":", 1)
+        return f, name
+    return None, arg
+
+
+def _cmd_run(args) -> int:
+    from lunar_drake.mission import run_mission
+    from lunar_drake.scenario import load_scenario
+
+    filename, name = _split_scenario(args.scenario)
+    scenario = load_scenario(
+        filename=filename, scenario_name=name, scenario_text=args.scenario_text
+    )
+    out = Path(args.out) if args.out else Path("runs") / name
+    meshcat = None
+    if not args.no_meshcat:
+        from pydrake.geometry import Meshcat
+
+        meshcat = Meshcat()
+        print(f"Meshcat: {meshcat.web_url()}", flush=True)
+    print(f"Scenario {name!r} (seed {scenario.random_seed}); building the site...", flush=True)
+    result = run_mission(
+        scenario=scenario,
+        scenario_name=name,
+        out_dir=out,
+        meshcat=meshcat,
+        duration=args.duration,
+        progress=not args.no_progress,
+    )
+    t = result.timing
+    s = result.summary["site"]
+    print(
+        f"Site: {s['shape_px'][0]}x{s['shape_px'][1]} px at {s['resolution_m']:g} m"
+        + (f", {s.get('craters')} craters, {s.get('rocks')} rocks" if "craters" in s else "")
+        + f" ({'cached' if t['site_cached'] else 'built'} in {t['site_s']:.1f} s; "
+        f"{t['site_dir']})"
+    )
+    print(
+        f"Simulated {result.summary['simulated_s']:.2f} s in {t['simulate_s']:.2f} s "
+        f"(diagram built in {t['build_s']:.2f} s)"
+    )
+    print(
+        f"Outputs: {result.out_dir.resolve()} (scenario.yaml, summary.json, timing.json"
+        + (", meshcat.html)" if meshcat else ")")
+    )
+    if meshcat is not None:
+        print(f"Meshcat: {result.meshcat_url} (static replay: {result.out_dir / 'meshcat.html'})")
+        if args.wait:
+            print("Serving Meshcat; press Ctrl-C to stop.", flush=True)
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+    return 0
+
+
+def _cmd_scenarios(args) -> int:
+    from lunar_drake.scenario import default_scenario_file, scenario_names
+
+    f = args.file or default_scenario_file()
+    for n in scenario_names(filename=f):
+        print(n)
+    return 0
+
+
+def _cmd_synth(args) -> int:
+    from lunar_drake.terrain.sfd import CraterSFD
+    from lunar_drake.terrain.synth import SynthConfig, synthesize_site
+
+    if args.from_dem and not Path(args.from_dem).exists():
+        from lunar_drake.errors import RasterNotFoundError
+
+        raise RasterNotFoundError(f"--from-dem {args.from_dem!r} does not exist")
+    if args.sfd == "powerlaw":
+        sfd = CraterSFD(
+            law="powerlaw", coefficient=args.powerlaw_coefficient, exponent=args.powerlaw_exponent
+        )
+    else:
+        sfd = CraterSFD(law=args.sfd)
+    if args.from_dem is None and args.size % args.factor:
+        raise ConfigError(f"--size {args.size} must be a multiple of --factor {args.factor}")
+    config = SynthConfig(
+        size_px=args.size,
+        resolution_m=args.resolution,
+        factor=args.factor,
+        seed=args.seed,
+        crater_sfd=sfd,
+        min_crater_m=args.min_crater_m,
+        max_crater_m=args.max_crater_m,
+        rock_abundance=args.rock_abundance,
+        min_rock_m=args.min_rock_m,
+        from_dem=args.from_dem,
+        tile_px=args.tile,
+        workers=args.workers,
+    )
+    t0 = time.perf_counter()
+    products = synthesize_site(config=config, out_dir=args.out, progress=not args.no_progress)
+    st = products.stats
+    print(
+        f"Site {st['size_px'][0]}x{st['size_px'][1]} px at {st['resolution_m']:g} m: "
+        f"{st['craters']} craters, {st['rocks']} rocks ({st['ejecta_rocks']} ejecta), "
+        f"z {st['z_min_m']:.2f}..{st['z_max_m']:.2f} m, {time.perf_counter() - t0:.1f} s"
+    )
+    print(f"Outputs: {Path(args.out).resolve()}")
+    return 0
+
+
+def _positive_int(s: str) -> int:
+    v = int(s)
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"{s!r} must be a positive integer")
+    return v
+
+
+def _positive_float(s: str) -> float:
+    v = float(s)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"{s!r} must be a positive number")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="lunar-drake", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run a mission scenario (the main job)")
+    r.add_argument(
+        "--scenario",
+        default="default",
+        help="scenario name in the packaged file, or FILE.yaml[:NAME]",
+    )
+    r.add_argument("--scenario-text", default="{}", help="YAML overrides, e.g. '{random_seed: 3}'")
+    r.add_argument("--duration", type=float, default=None, help="simulated seconds (override)")
+    r.add_argument("--out", default=None, help="run directory (default runs/<scenario>)")
+    r.add_argument("--no-meshcat", action="store_true", help="headless, no Meshcat server")
+    r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
+    r.add_argument("--no-progress", action="store_true", help="no progress bars")
+    r.set_defaults(func=_cmd_run)
+
+    sc = sub.add_parser("scenarios", help="list the named scenarios in a file")
+    sc.add_argument("file", nargs="?", default=None)
+    sc.set_defaults(func=_cmd_scenarios)
+
+    t = sub.add_parser("terrain", help="terrain tools")
+    tsub = t.add_subparsers(dest="terrain_command", required=True)
+    s = tsub.add_parser("synth", help="synthesize a site (paper section 4)")
+    s.add_argument("--size", type=_positive_int, default=1024, help="pixels a side")
+    s.add_argument("--resolution", type=_positive_float, default=0.1, help="metres per pixel")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--tile", type=_positive_int, default=1024, help="tile side (px)")
+    s.add_argument("--workers", type=_positive_int, default=2, help="worker threads")
+    s.add_argument(
+        "--factor", type=_positive_int, default=32, help="fractal upscaling factor (power of two)"
+    )
+    s.add_argument("--min-crater-m", type=_positive_float, default=0.5)
+    s.add_argument("--max-crater-m", type=_positive_float, default=None)
+    s.add_argument("--sfd", choices=["trask", "viper", "powerlaw"], default="trask")
+    s.add_argument(
+        "--powerlaw-coefficient",
+        type=_positive_float,
+        default=0.08,
+        help="c in N(>=D) = c D^e per m^2 (with --sfd powerlaw)",
+    )
+    s.add_argument(
+        "--powerlaw-exponent",
+        type=float,
+        default=-2.0,
+        help="e in N(>=D) = c D^e per m^2 (with --sfd powerlaw)",
+    )
+    s.add_argument(
+        "--rock-abundance",
+        type=float,
+        default=0.005,
+        help="Golombek-Rapp cumulative fractional area k, in [0, 1)",
+    )
+    s.add_argument("--min-rock-m", type=_positive_float, default=0.1)
+    s.add_argument("--from-dem", default=None, help="upscale this GeoTIFF DEM by --factor")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=_cmd_synth)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except LunarDrakeError as exc:
+        print(f"lunar-drake: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

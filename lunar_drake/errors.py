@@ -1,0 +1,45 @@
+"""Errors raised by lunar_drake.
+
+Every error derives from :class:`LunarDrakeError`; each subclass also derives from the
+built-in exception a caller would naturally catch (``ValueError`` for bad values,
+``OSError``/``FileNotFoundError`` for files), so ``except ValueError`` keeps working.
+Messages quote the offending value and say what is allowed.
+"""
+
+from __future__ import annotations
+
+
+class LunarDrakeError(Exception):
+    """Root of every error raised on purpose by lunar_drake."""
+
+
+class ConfigError(LunarDrakeError, ValueError):
+    """A scenario or command-line value is unknown, malformed or out of range."""
+
+
+class OutOfRangeError(ConfigError):
+    """A numeric value lies outside its allowed interval."""
+
+
+class RasterError(LunarDrakeError, OSError):
+    """A raster file is missing, unreadable, corrupt or not georeferenced."""
+
+
+class RasterNotFoundError(RasterError, FileNotFoundError):
+    """The raster path does not exist."""
+
+
+class CRSError(RasterError):
+    """A raster's coordinate reference system is missing or not in metres."""
+
+
+class NoDataError(LunarDrakeError, ValueError):
+    """A query hit NaN (nodata) cells, or a raster holds no valid data at all."""
+
+
+class OutOfBoundsError(LunarDrakeError, ValueError):
+    """A query point lies outside the raster's extent."""
+
+
+class SimulationError(LunarDrakeError, RuntimeError):
+    """A simulation could not be built or ran into an unrecoverable state."""

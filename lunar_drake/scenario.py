@@ -1,0 +1,248 @@
+"""Typed scenario for a whole run, loaded from YAML with Drake's ``yaml_load_typed``.
+
+A scenario file holds named scenarios at its top level (see
+``lunar_drake/scenarios/default.yaml``); ``load_scenario`` picks one by name, then
+applies optional ``--scenario-text`` YAML overrides on top. Unknown keys are rejected,
+and :func:`validate_scenario` checks every range after loading (``yaml_load_typed``
+assigns fields without running ``__post_init__``).
+
+Modelled on Drake's ``examples/hardware_sim/hardware_sim.py``.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
+
+import dataclasses as dc
+import math
+import re
+from importlib import resources
+from pathlib import Path
+
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
+from pydrake.visualization import VisualizationConfig
+
+from lunar_drake.errors import ConfigError, OutOfRangeError
+
+SFD_LAWS = ("trask", "viper", "powerlaw")
+
+
+@dc.dataclass
+class SiteConfig:
+    """Where and when the mission happens.
+
+    Attributes:
+        name: human-readable site name.
+        latitude_deg, longitude_deg: site centre on the IAU Moon sphere (deg; east lon).
+        epoch_utc: UTC of simulation time 0 (ISO 8601).
+    """
+
+    name: str = "near Mons Mouton (approximate)"
+    latitude_deg: float = -85.4
+    longitude_deg: float = 31.6
+    epoch_utc: str = "2027-11-20T12:00:00"
+
+
+@dc.dataclass
+class TerrainConfig:
+    """The site raster: either a DEM file, or synthesized (paper section 4).
+
+    Attributes:
+        dem: path of a GeoTIFF DEM to use; empty to synthesize. With ``factor`` > 1 the
+            DEM is fractally upscaled by ``factor`` first.
+        size_px: synthesized site side (pixels).
+        resolution_m: synthesized pixel size (m).
+        factor: fractal upscaling factor (power of two); the coarse grid is
+            ``size_px / factor`` pixels at ``resolution_m * factor`` metres.
+        sfd: crater size-frequency law: trask, viper or powerlaw.
+        powerlaw_coefficient, powerlaw_exponent: N(>=D) = c D^e per m^2 for ``powerlaw``.
+        min_crater_m, max_crater_m: crater diameter range (m); max 0 = automatic.
+        rock_abundance: Golombek-Rapp cumulative fractional area k of background rocks.
+        min_rock_m: smallest rock diameter placed (m).
+        tile_px: tile side for tiled synthesis (pixels); never changes the result.
+        workers: worker threads for tiled synthesis; never changes the result.
+    """
+
+    dem: str = ""
+    size_px: int = 2048
+    resolution_m: float = 0.1
+    factor: int = 32
+    sfd: str = "trask"
+    powerlaw_coefficient: float = 0.08
+    powerlaw_exponent: float = -2.0
+    min_crater_m: float = 0.5
+    max_crater_m: float = 0.0
+    rock_abundance: float = 0.005
+    min_rock_m: float = 0.1
+    tile_px: int = 1024
+    workers: int = 2
+
+
+@dc.dataclass
+class TerrainViewConfig:
+    """How the terrain is shown in Meshcat.
+
+    Attributes:
+        max_mesh_px: the LOD mesh is decimated so its larger side has at most this many
+            vertices.
+        albedo_gain: display gain applied to albedo for vertex colours.
+    """
+
+    max_mesh_px: int = 384
+    albedo_gain: float = 4.0
+
+
+@dc.dataclass
+class Scenario:
+    """Everything a run needs. Field names are the YAML keys."""
+
+    random_seed: int = 0
+    simulation_duration: float = 5.0
+    site: SiteConfig = dc.field(default_factory=SiteConfig)
+    terrain: TerrainConfig = dc.field(default_factory=TerrainConfig)
+    terrain_view: TerrainViewConfig = dc.field(default_factory=TerrainViewConfig)
+    simulator_config: SimulatorConfig = dc.field(
+        default_factory=lambda: SimulatorConfig(
+            max_step_size=0.01, accuracy=1.0e-3, use_error_control=False, target_realtime_rate=0.0
+        )
+    )
+    plant_config: MultibodyPlantConfig = dc.field(
+        default_factory=lambda: MultibodyPlantConfig(
+            time_step=0.002, discrete_contact_approximation=""
+        )
+    )
+    visualization: VisualizationConfig = dc.field(
+        default_factory=lambda: VisualizationConfig(publish_contacts=False, publish_inertia=False)
+    )
+
+
+def default_scenario_file() -> Path:
+    """The scenario file shipped with the package."""
+    return Path(str(resources.files("lunar_drake") / "scenarios" / "default.yaml"))
+
+
+def _drake_error(exc: Exception, *, where: str) -> ConfigError:
+    msg = str(exc)
+    m = re.search(r"YAML key '([^']+)'", msg)
+    hint = ""
+    if m:
+        hint = f" (unknown key {m.group(1)!r}; see Scenario in lunar_drake/scenario.py)"
+    return ConfigError(f"invalid scenario in {where}: {msg}{hint}")
+
+
+def scenario_names(*, filename: str | Path | None = None) -> list[str]:
+    """Names of the scenarios in a scenario file."""
+    import yaml
+
+    path = Path(filename) if filename else default_scenario_file()
+    with open(path) as f:
+        data = yaml.safe_load(f) or {}
+    return sorted(data)
+
+
+def load_scenario(
+    *, filename: str | Path | None = None, scenario_name: str = "default", scenario_text: str = "{}"
+) -> Scenario:
+    """Loads ``scenario_name`` from ``filename`` (default: the packaged file), applies the
+    ``scenario_text`` YAML overrides and validates the result.
+
+    Raises:
+        ConfigError: unknown file, name or key, a malformed value, or a value out of range.
+    """
+    path = Path(filename) if filename else default_scenario_file()
+    if not path.is_file():
+        raise ConfigError(f"scenario file {str(path)!r} does not exist")
+    names = scenario_names(filename=path)
+    if scenario_name not in names:
+        raise ConfigError(
+            f"scenario {scenario_name!r} not found in {str(path)!r}; choose one of {names}"
+        )
+    try:
+        result = yaml_load_typed(
+            schema=Scenario, filename=str(path), child_name=scenario_name, defaults=Scenario()
+        )
+    except Exception as exc:  # Drake raises RuntimeError for schema mismatches.
+        raise _drake_error(exc, where=f"{path}:{scenario_name}") from exc
+    try:
+        result = yaml_load_typed(schema=Scenario, data=scenario_text, defaults=result)
+    except Exception as exc:
+        raise _drake_error(exc, where="--scenario-text") from exc
+    validate_scenario(result)
+    return result
+
+
+def scenario_from_text(text: str) -> Scenario:
+    """A validated scenario from a YAML mapping (no name level), over the defaults."""
+    try:
+        result = yaml_load_typed(schema=Scenario, data=text, defaults=Scenario())
+    except Exception as exc:
+        raise _drake_error(exc, where="scenario text") from exc
+    validate_scenario(result)
+    return result
+
+
+def dump_scenario(scenario: Scenario) -> str:
+    """YAML text of a scenario (loads back to an equal scenario)."""
+    return yaml_dump_typed(scenario)
+
+
+def _check(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit="") -> None:
+    bad = (
+        value != value
+        or (value <= lo if lo_open else value < lo)
+        or (value >= hi if hi_open else value > hi)
+    )
+    if bad:
+        lb = "(" if lo_open else "["
+        rb = ")" if hi_open else "]"
+        raise OutOfRangeError(
+            f"{name} = {value!r} is out of range; allowed {lb}{lo}, {hi}{rb}{unit}"
+        )
+
+
+def _is_power_of_two(n: int) -> bool:
+    return n >= 1 and (n & (n - 1)) == 0
+
+
+def validate_scenario(s: Scenario) -> None:
+    """Range-checks a loaded scenario; raises OutOfRangeError/ConfigError naming the field."""
+    _check("random_seed", s.random_seed, 0, 2**63 - 1)
+    _check("simulation_duration", s.simulation_duration, 0.0, 1.0e7, unit=" s")
+    _check("site.latitude_deg", s.site.latitude_deg, -90.0, 90.0, unit=" deg")
+    _check("site.longitude_deg", s.site.longitude_deg, -360.0, 360.0, unit=" deg")
+    t = s.terrain
+    if t.sfd not in SFD_LAWS:
+        raise ConfigError(f"terrain.sfd = {t.sfd!r} is unknown; choose one of {list(SFD_LAWS)}")
+    _check("terrain.size_px", t.size_px, 16, 65536)
+    _check("terrain.resolution_m", t.resolution_m, 0.0, 1000.0, lo_open=True, unit=" m")
+    if not _is_power_of_two(t.factor):
+        raise ConfigError(f"terrain.factor = {t.factor!r} must be a power of two (1, 2, 4, ...)")
+    if not t.dem and t.size_px % t.factor:
+        raise ConfigError(
+            f"terrain.size_px = {t.size_px} must be a multiple of terrain.factor = {t.factor}"
+        )
+    _check("terrain.min_crater_m", t.min_crater_m, 0.0, 1.0e5, lo_open=True, unit=" m")
+    if t.max_crater_m and t.max_crater_m <= t.min_crater_m:
+        raise OutOfRangeError(
+            f"terrain.max_crater_m = {t.max_crater_m!r} must exceed terrain.min_crater_m = "
+            f"{t.min_crater_m!r} (or be 0 for automatic)"
+        )
+    _check("terrain.powerlaw_coefficient", t.powerlaw_coefficient, 0.0, 1.0e6, lo_open=True)
+    _check("terrain.powerlaw_exponent", t.powerlaw_exponent, -6.0, 0.0, hi_open=True)
+    _check("terrain.rock_abundance", t.rock_abundance, 0.0, 1.0, hi_open=True)
+    _check("terrain.min_rock_m", t.min_rock_m, 0.0, 100.0, lo_open=True, unit=" m")
+    _check("terrain.tile_px", t.tile_px, 64, 16384)
+    _check("terrain.workers", t.workers, 1, 256)
+    _check("terrain_view.max_mesh_px", s.terrain_view.max_mesh_px, 8, 4096)
+    _check("terrain_view.albedo_gain", s.terrain_view.albedo_gain, 0.0, 100.0, lo_open=True)
+    _check(
+        "simulator_config.max_step_size",
+        s.simulator_config.max_step_size,
+        0.0,
+        10.0,
+        lo_open=True,
+        unit=" s",
+    )
+    _check("plant_config.time_step", s.plant_config.time_step, 0.0, 1.0, unit=" s")
+    if not math.isfinite(s.simulation_duration):
+        raise OutOfRangeError(f"simulation_duration = {s.simulation_duration!r} must be finite")
