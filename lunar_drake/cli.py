@@ -112,6 +112,7 @@ def _cmd_synth(args) -> int:
         min_crater_m=args.min_crater_m,
         max_crater_m=args.max_crater_m,
         rock_abundance=args.rock_abundance,
+        ejecta_rock_abundance=args.ejecta_rock_abundance,
         min_rock_m=args.min_rock_m,
         from_dem=args.from_dem,
         tile_px=args.tile,
@@ -197,6 +198,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.005,
         help="Golombek-Rapp cumulative fractional area k, in [0, 1)",
+    )
+    s.add_argument(
+        "--ejecta-rock-abundance",
+        type=float,
+        default=0.05,
+        help="Golombek-Rapp k of ejecta rocks on a fresh crater rim, in [0, 1)",
     )
     s.add_argument("--min-rock-m", type=_positive_float, default=0.1)
     s.add_argument("--from-dem", default=None, help="upscale this GeoTIFF DEM by --factor")

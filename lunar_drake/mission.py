@@ -92,7 +92,8 @@ def run_mission(
         _write_text(out_dir / "meshcat.html", meshcat.StaticHtml())
         url = meshcat.web_url()
 
-    x0, x1, y0, y1 = heightfield.bounds
+    b = heightfield.bounds
+    x0, x1, y0, y1 = b.left, b.right, b.bottom, b.top
     zc = float(heightfield.height(np.array([0.0]), np.array([0.0]))[0])
     summary = {
         "scenario": scenario_name,

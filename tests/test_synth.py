@@ -126,15 +126,35 @@ def test_upscale_real_dem_keeps_its_samples(tmp_path):
     src = tmp_path / "coarse.tif"
     _write_dem(src, coarse, res=2.0)
     cfg = SynthConfig(
-        from_dem=str(src), factor=8, seed=3, min_crater_m=500.0, rock_abundance=0.0, tile_px=128
+        from_dem=str(src),
+        factor=8,
+        seed=3,
+        min_crater_m=4.0,
+        rock_abundance=0.0,
+        ejecta_rock_abundance=0.0,
+        tile_px=128,
     )
     products = synthesize_site(config=cfg, out_dir=tmp_path / "up", progress=False)
-    assert products.stats["craters"] == 0 and products.stats["rocks"] == 0
+    assert products.stats["rocks"] == 0
     with rasterio.open(tmp_path / "up" / "dem.tif") as ds:
         assert ds.shape == (256, 256)
         assert ds.res == (0.25, 0.25)
+        # fine pixel (0, 0) is centred on coarse pixel (0, 0) at (1001, 1999)
+        assert ds.xy(0, 0) == pytest.approx((1001.0, 1999.0))
         fine = ds.read(1)
-    np.testing.assert_allclose(fine[::8, ::8], coarse, atol=1e-4)
+    # Coarse samples are kept exactly wherever no crater was stamped.
+    from lunar_drake.terrain.craters import crater_extent_m
+
+    g = products.grid
+    x, y = g.pixel_centers(0, 0, 256, 256)
+    X, Y = np.meshgrid(x[::8], y[::8])
+    cr = products.craters
+    reach = crater_extent_m(cr.diameter_m, params=cfg.crater_shape)
+    touched = np.zeros(X.shape, bool)
+    for cx, cy, rr in zip(cr.x_m, cr.y_m, reach, strict=True):
+        touched |= (X - cx) ** 2 + (Y - cy) ** 2 <= (rr + 0.25) ** 2
+    assert (~touched).mean() > 0.2
+    np.testing.assert_allclose(fine[::8, ::8][~touched], coarse[~touched], atol=1e-4)
 
 
 def test_bad_inputs(tmp_path):

@@ -21,7 +21,8 @@ def terrain_lod_mesh(
     z, _res = heightfield.decimated(max_size=max_px)
     z = np.asarray(z, dtype=np.float64)
     nr, nc = z.shape
-    x0, x1, y0, y1 = heightfield.bounds
+    b = heightfield.bounds
+    x0, x1, y0, y1 = b.left, b.right, b.bottom, b.top
     xs = x0 + (np.arange(nc) + 0.5) * (x1 - x0) / nc
     ys = y1 - (np.arange(nr) + 0.5) * (y1 - y0) / nr
     X, Y = np.meshgrid(xs, ys)

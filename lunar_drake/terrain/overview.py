@@ -68,7 +68,9 @@ def write_overview(products, *, config, path: str | Path, max_px: int = 1024) ->
     if len(d):
         ax1.loglog(d, np.arange(1, len(d) + 1), "k.", ms=2, label="catalog N(>=D)")
         dd = np.geomspace(d.min(), d.max(), 100)
-        model = sfd_mod.cumulative_density(dd, sfd=config.crater_sfd)
+        # The catalog is truncated at its largest diameter d_max: N(>=D) - N(>=d_max).
+        n = sfd_mod.cumulative_density(np.append(dd, d.max()), sfd=config.crater_sfd)
+        model = n[:-1] - n[-1] + 1.0 / grid.area_m2
         ax1.loglog(dd, model * grid.area_m2, "r-", label=f"model: {config.crater_sfd.law}")
     ax1.set_xlabel("crater diameter D (m)")
     ax1.set_ylabel("cumulative count N(>=D) in site")

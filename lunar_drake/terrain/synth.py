@@ -68,7 +68,10 @@ class SynthConfig:
         seed: random seed.
         crater_sfd: crater size-frequency law.
         min_crater_m, max_crater_m: crater diameter range (m); ``None`` = automatic.
-        rock_abundance: Golombek-Rapp k of background rocks (cumulative fractional area).
+        rock_abundance: Golombek-Rapp k of background rocks (cumulative fractional area);
+            0 for none.
+        ejecta_rock_abundance: Golombek-Rapp k of ejecta rocks on the rim of a fresh
+            ejecta crater (the density elsewhere follows the ejecta map); 0 for none.
         min_rock_m: smallest rock diameter (m).
         from_dem: path of a source DEM to upscale by ``factor``; ``None`` to synthesize.
         existing_craters: (x_m, y_m, diameter_m) of craters already in ``from_dem``.
@@ -84,6 +87,7 @@ class SynthConfig:
     min_crater_m: float = 0.5
     max_crater_m: float | None = None
     rock_abundance: float = 0.005
+    ejecta_rock_abundance: float = 0.05
     min_rock_m: float = 0.1
     from_dem: str | None = None
     existing_craters: tuple[tuple[float, float, float], ...] = ()
@@ -120,6 +124,10 @@ class SynthConfig:
             )
         if not 0 <= self.rock_abundance < 1:
             raise OutOfRangeError(f"rock_abundance = {self.rock_abundance!r}; allowed [0, 1)")
+        if not 0 <= self.ejecta_rock_abundance < 1:
+            raise OutOfRangeError(
+                f"ejecta_rock_abundance = {self.ejecta_rock_abundance!r}; allowed [0, 1)"
+            )
         if not self.min_rock_m > 0:
             raise OutOfRangeError(f"min_rock_m = {self.min_rock_m!r} must be > 0 m")
 
@@ -166,7 +174,11 @@ def _coarse_dem(config: SynthConfig):
                 f"{config.from_dem!r} has {int(bad.sum())} nodata cells (first at row {r}, "
                 f"col {c}); fill the holes before upscaling (all cells must be valid)"
             )
-        return coarse, hf.resolution_m, hf.crs, hf.origin_xy
+        # Point-registered upscaling: fine pixel 0 is centred on coarse pixel 0, so the
+        # fine raster's centre sits half a coarse pixel minus half a fine pixel east/south.
+        shift = 0.5 * hf.resolution_m * (1.0 - 1.0 / config.factor)
+        ox, oy = hf.origin_xy
+        return coarse, hf.resolution_m, hf.crs, (ox + shift, oy - shift)
     n = config.size_px // config.factor
     coarse_res = config.resolution_m * config.factor
     coarse = fractal.coarse_fractal(
@@ -244,6 +256,9 @@ def synthesize_site(
         rock_sfd_background=RockSFD(law="golombek_rapp", k=config.rock_abundance)
         if config.rock_abundance > 0
         else None,
+        rock_sfd_ejecta=RockSFD(law="golombek_rapp", k=config.ejecta_rock_abundance)
+        if config.ejecta_rock_abundance > 0
+        else None,
         rock_d_min_m=config.min_rock_m,
         existing_craters=config.existing_craters,
     )
@@ -255,7 +270,9 @@ def synthesize_site(
     # Crater planes from the smooth low-frequency surface (tile independent).
     def low_surface_xy(x, y):
         r, c = grid.to_pixel(x, y)
-        return fractal.low_surface_at(low, factor=F, rows=r, cols=c)
+        return fractal.low_surface_at(
+            low, factor=F, rows=r, cols=c, method=config.fractal.low_interpolation
+        )
 
     shape = config.crater_shape
     planes = craters_mod.crater_planes(
@@ -271,7 +288,12 @@ def synthesize_site(
 
     # How far (m) each object reaches from its centre, for selecting it per tile.
     crater_reach = craters_mod.crater_extent_m(craters.diameter_m, params=shape) + res
-    splash_reach = albedo_mod.splash_extent_m(craters.diameter_m, params=config.albedo) + res
+    splash_reach = (
+        albedo_mod.splash_extent_m(
+            craters.diameter_m, params=config.albedo, freshness=craters.freshness
+        )
+        + res
+    )
     rock_reach = 0.75 * rocks.diameter_m + 2.0 * res
 
     scratch_dir = Path(tempfile.mkdtemp(prefix=".synth-", dir=out_dir))
@@ -282,7 +304,9 @@ def synthesize_site(
 
         def pass1(r0, c0, h, w):
             x, y = grid.pixel_centers(r0, c0, h, w)
-            z = fractal.upscale_low(low, factor=F, window=(r0, c0, h, w))
+            z = fractal.upscale_low(
+                low, factor=F, window=(r0, c0, h, w), method=config.fractal.low_interpolation
+            )
             sel = _in_box(craters, crater_reach, x, y)
             craters_mod.stamp_craters(
                 z,
@@ -388,7 +412,7 @@ def synthesize_site(
             )
             zh = np.pad(
                 z,
-                ((r0 - ra == 0, rb - (r0 + h) == 0), (c0 - ca == 0, cb - (c0 + w) == 0)),
+                ((int(r0 == ra), int(rb == r0 + h)), (int(c0 == ca), int(cb == c0 + w))),
                 mode="edge",
             )
             inner = (slice(r0 - ra, r0 - ra + h), slice(c0 - ca, c0 - ca + w))
