@@ -12,7 +12,9 @@ py="${PYTHON:-python3}"
 
 system_deps() {
   # open3d's wheel links libusb-1.0 (and libgomp); Debian/Ubuntu names below.
-  if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+  local libs
+  libs="$(ldconfig -p 2>/dev/null || /sbin/ldconfig -p 2>/dev/null || true)"
+  if [[ "$libs" != *libusb-1.0.so.0* ]]; then
     local sudo=""
     [ "$(id -u)" -eq 0 ] || sudo="sudo"
     echo "lunar.sh: installing system library libusb-1.0-0 (needed by open3d)" >&2

@@ -115,6 +115,8 @@ def _cmd_synth(args) -> int:
         ejecta_rock_abundance=args.ejecta_rock_abundance,
         min_rock_m=args.min_rock_m,
         from_dem=args.from_dem,
+        center_lat_deg=args.lat,
+        center_lon_deg=args.lon,
         tile_px=args.tile,
         workers=args.workers,
     )
@@ -206,6 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="Golombek-Rapp k of ejecta rocks on a fresh crater rim, in [0, 1)",
     )
     s.add_argument("--min-rock-m", type=_positive_float, default=0.1)
+    s.add_argument("--lat", type=float, default=-90.0, help="site centre latitude (deg)")
+    s.add_argument("--lon", type=float, default=0.0, help="site centre longitude (deg east)")
     s.add_argument("--from-dem", default=None, help="upscale this GeoTIFF DEM by --factor")
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=_cmd_synth)

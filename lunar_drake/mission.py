@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import os
+import re
 import time
 from pathlib import Path
 
@@ -100,7 +101,7 @@ def run_mission(
         "random_seed": scenario.random_seed,
         "simulated_s": float(simulator.get_context().get_time()),
         "diagram": diagram.get_name(),
-        "systems": sorted(s.get_name() for s in diagram.GetSystems()),
+        "systems": sorted(re.sub(r"@[0-9a-f]+$", "", s.get_name()) for s in diagram.GetSystems()),
         "site": {
             "dem": str(site.dem.name),
             "synthesized": site.synthesized,

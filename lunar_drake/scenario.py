@@ -89,7 +89,7 @@ class TerrainViewConfig:
     """
 
     max_mesh_px: int = 384
-    albedo_gain: float = 4.0
+    albedo_gain: float = 3.0
 
 
 @dc.dataclass

@@ -54,6 +54,8 @@ def synth_config_from_scenario(scenario: Scenario) -> SynthConfig:
         rock_abundance=t.rock_abundance,
         min_rock_m=t.min_rock_m,
         from_dem=t.dem or None,
+        center_lat_deg=scenario.site.latitude_deg,
+        center_lon_deg=scenario.site.longitude_deg,
         tile_px=t.tile_px,
         workers=t.workers,
     )

@@ -4,7 +4,6 @@ import json
 
 import numpy as np
 import pytest
-from lunar_drake.terrain.heightfield import Heightfield
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
@@ -13,6 +12,7 @@ from lunar_drake.diagrams.mission import MakeMissionDiagram
 from lunar_drake.scenario import load_scenario
 from lunar_drake.systems.terrain_source import TerrainSource
 from lunar_drake.systems.terrain_visualizer import terrain_lod_mesh
+from lunar_drake.terrain.heightfield import Heightfield
 
 
 @pytest.fixture
@@ -161,3 +161,24 @@ def test_cli_terrain_synth_writes_everything(tmp_path, capsys):
     ):
         assert (out / f).exists(), f
     assert "craters" in capsys.readouterr().out
+
+
+def test_run_mission_with_meshcat_writes_replay(cache, tmp_path):
+    from lunar_drake.mission import run_mission
+
+    scenario = load_scenario(scenario_name="small")
+    meshcat = Meshcat()
+    result = run_mission(
+        scenario=scenario,
+        scenario_name="small",
+        out_dir=tmp_path,
+        meshcat=meshcat,
+        duration=0.3,
+        progress=False,
+    )
+    assert result.meshcat_url.startswith("http://")
+    assert (tmp_path / "meshcat.html").stat().st_size > 10_000
+    assert meshcat.HasPath("/terrain")
+    systems = result.summary["systems"]
+    assert {"terrain", "terrain_view", "plant", "scene_graph"} <= set(systems)
+    assert not any("@" in s for s in systems)  # no addresses: summary.json is reproducible

@@ -85,13 +85,25 @@ def test_rocks_raise_the_dem_where_the_mask_says(site):
     assert mask[r[inside], c[inside]].mean() > 0.9
 
 
-def test_same_seed_same_bytes_across_tiles_and_workers(site, tmp_path):
-    out, _ = site
-    ref = _digests(out)
-    for tile, workers in ((128, 2), (96, 1)):
+def test_same_seed_same_bytes_across_tiles_and_workers(tmp_path):
+    """The issue's check: tiles of 256 and 1024 px, 1 and 2 workers, one odd tiling."""
+    cfg = dict(size_px=1024, resolution_m=0.04, factor=32, min_crater_m=0.5, min_rock_m=0.1)
+    ref = None
+    for tile, workers in ((1024, 1), (256, 2), (256, 1), (384, 2)):
         d = tmp_path / f"t{tile}w{workers}"
-        synthesize_site(config=_config(tile_px=tile, workers=workers), out_dir=d, progress=False)
-        assert _digests(d) == ref, (tile, workers)
+        synthesize_site(
+            config=_config(tile_px=tile, workers=workers, **cfg), out_dir=d, progress=False
+        )
+        got = _digests(d)
+        if ref is None:
+            ref = got
+        assert got == ref, (tile, workers)
+
+
+def test_same_seed_same_bytes_twice(site, tmp_path):
+    out, _ = site
+    synthesize_site(config=_config(), out_dir=tmp_path, progress=False)
+    assert _digests(tmp_path) == _digests(out)
 
 
 def test_different_seed_differs(site, tmp_path):
@@ -179,3 +191,18 @@ def test_bad_inputs(tmp_path):
         SynthConfig(size_px=100, factor=32)
     with pytest.raises(ConfigError, match=r"rock_abundance = 1\.2"):
         SynthConfig(rock_abundance=1.2)
+
+
+def test_site_is_georeferenced_at_its_latitude_longitude(tmp_path):
+    from lunar_drake.terrain.crs import xy_to_lonlat
+
+    cfg = _config(size_px=64, factor=8, center_lat_deg=-85.4, center_lon_deg=31.6, tile_px=64)
+    synthesize_site(config=cfg, out_dir=tmp_path, progress=False, overview=False)
+    with rasterio.open(tmp_path / "dem.tif") as ds:
+        cx = ds.bounds.left + 0.5 * (ds.bounds.right - ds.bounds.left)
+        cy = ds.bounds.bottom + 0.5 * (ds.bounds.top - ds.bounds.bottom)
+        lon, lat = xy_to_lonlat(cx, cy, crs=ds.crs)
+    assert float(lat) == pytest.approx(-85.4, abs=1e-9)
+    assert float(lon) == pytest.approx(31.6, abs=1e-9)
+    with pytest.raises(ConfigError, match=r"center_lat_deg = 0\.0"):
+        _config(center_lat_deg=0.0)

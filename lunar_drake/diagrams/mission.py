@@ -9,8 +9,10 @@ ground software and the comms links to this same factory. Exported ports are nam
 from __future__ import annotations
 
 import numpy as np
+from pydrake.lcm import DrakeLcm
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import SharedPointerSystem
 from pydrake.visualization import ApplyVisualizationConfig
 
 from lunar_drake.scenario import Scenario
@@ -48,7 +50,11 @@ def MakeMissionDiagram(
             ),
         )
         builder.Connect(terrain.heightfield_output, view.heightfield_input)
-        ApplyVisualizationConfig(scenario.visualization, builder, meshcat=meshcat)
+        # Drake's LCM publishers go to an in-process bus (no network traffic); the diagram
+        # owns that bus so it lives as long as the publishers.
+        lcm = DrakeLcm("memq://lunar_drake")
+        builder.AddNamedSystem("visualization_lcm", SharedPointerSystem(lcm))
+        ApplyVisualizationConfig(scenario.visualization, builder, meshcat=meshcat, lcm=lcm)
     diagram = builder.Build()
     diagram.set_name("mission")
     return diagram

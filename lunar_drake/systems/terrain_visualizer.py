@@ -61,6 +61,7 @@ class TerrainVisualizer(LeafSystem):
         albedo: optional albedo grid (any resolution) for vertex colours.
         albedo_gain: display gain on albedo.
         path: Meshcat scene path.
+        frame_view: also set a black sky, hide the grid and point the camera at the site.
     """
 
     def __init__(
@@ -71,6 +72,7 @@ class TerrainVisualizer(LeafSystem):
         albedo=None,
         albedo_gain: float = 4.0,
         path: str = "/terrain",
+        frame_view: bool = True,
     ):
         super().__init__()
         self._meshcat = meshcat
@@ -78,6 +80,7 @@ class TerrainVisualizer(LeafSystem):
         self._albedo = albedo
         self._gain = float(albedo_gain)
         self._path = path
+        self._frame_view = bool(frame_view)
         self.heightfield_input = self.DeclareAbstractInputPort(
             "heightfield",
             AbstractValue.Make(Heightfield.from_array(np.zeros((2, 2)), resolution_m=1.0)),
@@ -90,4 +93,22 @@ class TerrainVisualizer(LeafSystem):
             hf, max_px=self._max_px, albedo=self._albedo, albedo_gain=self._gain
         )
         self._meshcat.SetTriangleColorMesh(self._path, verts, faces, colors)
+        if self._frame_view:
+            self._set_view(hf)
         return EventStatus.Succeeded()
+
+    def _set_view(self, hf: Heightfield) -> None:
+        """Black sky, no grid, a low ambient light, and a camera over the site's SW corner."""
+        m = self._meshcat
+        m.SetProperty("/Grid", "visible", False)
+        m.SetProperty("/Axes", "visible", False)
+        m.SetProperty("/Background", "top_color", [0.0, 0.0, 0.0])
+        m.SetProperty("/Background", "bottom_color", [0.02, 0.02, 0.03])
+        m.SetProperty("/Lights/AmbientLight/<object>", "intensity", 0.25)
+        b = hf.bounds
+        half = 0.5 * max(b.right - b.left, b.top - b.bottom)
+        z0 = float(np.nanmean(hf.decimated(max_size=16)[0]))
+        m.SetCameraPose(
+            camera_in_world=np.array([-0.55 * half, -0.55 * half, z0 + 0.3 * half]),
+            target_in_world=np.array([0.0, 0.0, z0]),
+        )

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import rasterio
+import rasterio.shutil
 from rasterio.crs import CRS
 from rasterio.errors import NotGeoreferencedWarning, RasterioError
 from rasterio.transform import Affine
@@ -98,6 +99,10 @@ def _commit(tmp: str, path: str) -> None:
     # GDAL writes a PAM sidecar only for metadata a TIFF cannot hold; keep it with the file.
     if os.path.exists(tmp + ".aux.xml"):
         os.replace(tmp + ".aux.xml", path + ".aux.xml")
+
+
+# GeoTIFF creation options carried over when a file is rewritten in canonical order.
+_CREATION_KEYS = ("tiled", "blockxsize", "blockysize", "interleave", "BIGTIFF", "compress")
 
 
 def _creation_profile(
@@ -277,12 +282,22 @@ class GeoTiffWriter:
         self._ds, self._tmp = None, None
         if ds is None or tmp is None:
             return
+        canon = None
         try:
             ds.close()
             if exc_type is None:
-                _commit(tmp, self.path)
+                # Windows written from several threads land in the file in completion
+                # order; a sequential GDAL copy puts the blocks in canonical order, so the
+                # file's bytes depend only on its pixels (not on tiling or workers).
+                canon = _temp_name(self.path)
+                opts = {k: v for k, v in self._profile.items() if k in _CREATION_KEYS}
+                rasterio.shutil.copy(tmp, canon, driver="GTiff", **opts)
+                _remove_quietly(tmp)
+                _commit(canon, self.path)
         except BaseException:
             _remove_quietly(tmp)
+            if canon is not None:
+                _remove_quietly(canon)
             raise
         if exc_type is not None:
             _remove_quietly(tmp)

@@ -37,7 +37,11 @@ from lunar_drake.terrain import albedo as albedo_mod
 from lunar_drake.terrain import catalog as catalog_mod
 from lunar_drake.terrain import craters as craters_mod
 from lunar_drake.terrain import fractal, rock_library, surface
-from lunar_drake.terrain.crs import moon_south_polar_stereographic
+from lunar_drake.terrain.crs import (
+    lonlat_to_xy,
+    moon_north_polar_stereographic,
+    moon_south_polar_stereographic,
+)
 from lunar_drake.terrain.geotiff import GeoTiffWriter
 from lunar_drake.terrain.grid import GridSpec
 from lunar_drake.terrain.sfd import CraterSFD, RockSFD
@@ -76,6 +80,9 @@ class SynthConfig:
         from_dem: path of a source DEM to upscale by ``factor``; ``None`` to synthesize.
         existing_craters: (x_m, y_m, diameter_m) of craters already in ``from_dem``.
         fractal, crater_shape, albedo: parameters of those steps.
+        center_lat_deg, center_lon_deg: where a synthesized site's centre lies on the IAU
+            Moon sphere (deg); it sets the georeferencing (south- or north-polar
+            stereographic by hemisphere). Ignored with ``from_dem``.
         tile_px, workers: how to compute; never change the result.
     """
 
@@ -87,7 +94,7 @@ class SynthConfig:
     min_crater_m: float = 0.5
     max_crater_m: float | None = None
     rock_abundance: float = 0.005
-    ejecta_rock_abundance: float = 0.05
+    ejecta_rock_abundance: float = 0.1
     min_rock_m: float = 0.1
     from_dem: str | None = None
     existing_craters: tuple[tuple[float, float, float], ...] = ()
@@ -96,10 +103,19 @@ class SynthConfig:
         default_factory=craters_mod.CraterShapeParams
     )
     albedo: albedo_mod.AlbedoParams = dc.field(default_factory=albedo_mod.AlbedoParams)
+    center_lat_deg: float = -90.0
+    center_lon_deg: float = 0.0
     tile_px: int = 1024
     workers: int = 2
 
     def __post_init__(self):
+        if not -90.0 <= self.center_lat_deg <= 90.0 or self.center_lat_deg == 0.0:
+            raise OutOfRangeError(
+                f"center_lat_deg = {self.center_lat_deg!r}; allowed [-90, 0) or (0, 90] "
+                "(polar stereographic sites)"
+            )
+        if not -360.0 <= self.center_lon_deg <= 360.0:
+            raise OutOfRangeError(f"center_lon_deg = {self.center_lon_deg!r}; allowed [-360, 360]")
         if self.factor < 1 or self.factor & (self.factor - 1):
             raise ConfigError(f"factor = {self.factor!r} must be a power of two (1, 2, 4, ...)")
         if self.from_dem is None:
@@ -160,7 +176,6 @@ class SiteProducts:
 
 def _coarse_dem(config: SynthConfig):
     """Coarse DEM (float64), its resolution (m), CRS and CRS centre of the site."""
-    crs = moon_south_polar_stereographic()
     if config.from_dem:
         from lunar_drake.terrain.heightfield import Heightfield
 
@@ -187,7 +202,12 @@ def _coarse_dem(config: SynthConfig):
         rng=rng.generator(config.seed, "terrain/coarse"),
         params=config.fractal,
     )
-    return coarse, coarse_res, crs, (0.0, 0.0)
+    if config.center_lat_deg < 0:
+        crs = moon_south_polar_stereographic()
+    else:
+        crs = moon_north_polar_stereographic()
+    x, y = lonlat_to_xy(config.center_lon_deg, config.center_lat_deg, crs=crs)
+    return coarse, coarse_res, crs, (float(x), float(y))
 
 
 def _in_box(cat, reach: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
