@@ -1,0 +1,1 @@
+"""autonomy core (no Drake)."""

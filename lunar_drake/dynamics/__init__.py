@@ -1,0 +1,1 @@
+"""dynamics core (no Drake)."""

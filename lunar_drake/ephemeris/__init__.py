@@ -1,0 +1,1 @@
+"""ephemeris core (no Drake)."""
