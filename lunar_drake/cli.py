@@ -132,6 +132,32 @@ def _cmd_synth(args) -> int:
     return 0
 
 
+def _cmd_slip_study(args) -> int:
+    from lunar_drake.studies.slip_study import parse_slopes, run_slip_study, summarize
+
+    slopes = parse_slopes(args.slopes)
+    rovers = [r.strip() for r in args.rover.split(",")]
+    rows = run_slip_study(
+        rovers=rovers,
+        slopes_deg=slopes,
+        distance_m=args.distance,
+        seeds=args.seeds,
+        out_dir=args.out,
+        soil=args.soil,
+        speed_mps=args.speed,
+        workers=args.workers,
+        progress=not args.no_progress,
+    )
+    print(f"{'rover':<9} {'slope':>6} {'mean slip':>10} {'min':>7} {'max':>7} {'reference':>10}")
+    for r in summarize(rows):
+        print(
+            f"{r['rover']:<9} {r['slope_deg']:>6.1f} {100 * r['mean']:>9.2f}% "
+            f"{100 * r['min']:>6.2f}% {100 * r['max']:>6.2f}% {100 * r['reference']:>9.2f}%"
+        )
+    print(f"Outputs: {Path(args.out).resolve()} (slip.csv, slip.png, params.json)")
+    return 0
+
+
 def _positive_int(s: str) -> int:
     v = int(s)
     if v <= 0:
@@ -167,6 +193,26 @@ def build_parser() -> argparse.ArgumentParser:
     sc = sub.add_parser("scenarios", help="list the named scenarios in a file")
     sc.add_argument("file", nargs="?", default=None)
     sc.set_defaults(func=_cmd_scenarios)
+
+    ss = sub.add_parser("slip-study", help="slip vs slope on planar ramps (paper Figs. 22-24)")
+    ss.add_argument(
+        "--rover", default="explicit", help="skid, explicit, or a comma list (e.g. skid,explicit)"
+    )
+    ss.add_argument("--slopes", default="0:20:5", help="A:B:STEP in degrees, or a comma list")
+    ss.add_argument("--distance", type=_positive_float, default=5.0, help="metres upslope")
+    ss.add_argument("--seeds", type=_positive_int, default=3)
+    ss.add_argument("--soil", default="lunar_regolith", help="lunar_regolith or grc1")
+    ss.add_argument("--speed", type=_positive_float, default=0.1, help="commanded m/s")
+    ss.add_argument("--workers", type=_positive_int, default=1, help="parallel processes")
+    ss.add_argument("--out", required=True)
+    ss.add_argument("--no-progress", action="store_true")
+    ss.set_defaults(func=_cmd_slip_study)
+
+    from lunar_drake.ephemeris import cli as ephemeris_cli
+
+    pe = sub.add_parser("ephemeris", help="Sun and Earth in a lunar site's sky (SPICE)")
+    ephemeris_cli.add_arguments(pe)
+    pe.set_defaults(func=ephemeris_cli.run_cli)
 
     t = sub.add_parser("terrain", help="terrain tools")
     tsub = t.add_subparsers(dest="terrain_command", required=True)

@@ -60,8 +60,10 @@ def run_mission(
     plus ``meshcat.html`` (a static replay) when Meshcat is on.
     """
     from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+    from pydrake.systems.framework import DiagramBuilder, EventStatus
+    from pydrake.systems.primitives import LogVectorOutput
 
-    from lunar_drake.diagrams.mission import MakeMissionDiagram
+    from lunar_drake.diagrams.mission import ROVER_PORTS, MakeMissionDiagram
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -69,11 +71,41 @@ def run_mission(
     site = ensure_site(scenario, cache_dir=cache_dir, progress=progress)
     t_site = time.perf_counter()
     heightfield, albedo = load_site_layers(site)
-    diagram = MakeMissionDiagram(
+    mission = MakeMissionDiagram(
         scenario=scenario, heightfield=heightfield, albedo=albedo, meshcat=meshcat
     )
+    builder = DiagramBuilder()
+    builder.AddSystem(mission)
+    has_rover = mission.HasOutputPort("rover.pose")
+    loggers = {}
+    if has_rover:
+        for name in ROVER_PORTS:
+            loggers[name] = LogVectorOutput(
+                mission.GetOutputPort(name), builder, scenario.rover.log_period_s
+            )
+    diagram = builder.Build()
+    diagram.set_name("run")
     simulator = Simulator(diagram)
     ApplySimulatorConfig(scenario.simulator_config, simulator)
+    stop_reason = {"reason": "duration reached"}
+    if has_rover:
+        off_port = mission.GetOutputPort("rover.off_terrain")
+        pose_port = mission.GetOutputPort("rover.pose")
+
+        def monitor(root_context):
+            ctx = mission.GetMyContextFromRoot(root_context)
+            if off_port.Eval(ctx)[0] > 0.5:
+                x, y = pose_port.Eval(ctx)[:2]
+                b = heightfield.bounds
+                stop_reason["reason"] = (
+                    f"rover left the terrain at t = {root_context.get_time():.2f} s, "
+                    f"chassis at ({x:.2f}, {y:.2f}) m; site x in [{b.left:g}, {b.right:g}], "
+                    f"y in [{b.bottom:g}, {b.top:g}] m"
+                )
+                return EventStatus.ReachedTermination(diagram, stop_reason["reason"])
+            return EventStatus.DidNothing()
+
+        simulator.set_monitor(monitor)
     if meshcat is not None:
         meshcat.StartRecording(set_visualizations_while_recording=True)
     simulator.Initialize()
@@ -100,8 +132,9 @@ def run_mission(
         "scenario": scenario_name,
         "random_seed": scenario.random_seed,
         "simulated_s": float(simulator.get_context().get_time()),
-        "diagram": diagram.get_name(),
-        "systems": sorted(re.sub(r"@[0-9a-f]+$", "", s.get_name()) for s in diagram.GetSystems()),
+        "stop_reason": stop_reason["reason"],
+        "diagram": mission.get_name(),
+        "systems": sorted(re.sub(r"@[0-9a-f]+$", "", s.get_name()) for s in mission.GetSystems()),
         "site": {
             "dem": str(site.dem.name),
             "synthesized": site.synthesized,
@@ -116,15 +149,99 @@ def run_mission(
         summary["site"]["craters"] = info["stats"]["craters"]
         summary["site"]["rocks"] = info["stats"]["rocks"]
         summary["site"]["content_key"] = info["stats"]["content_key"]
+    if has_rover:
+        root = simulator.get_context()
+        summary["rover"] = _write_rover_logs(out_dir, loggers, root, scenario)
     timing = {
         "site_s": t_site - t0,
         "site_cached": site.cached,
         "build_s": t_built - t_site,
         "simulate_s": t_sim - t_built,
-        "realtime_factor": (end / (t_sim - t_built)) if t_sim > t_built else None,
+        "realtime_factor": (
+            simulator.get_context().get_time() / (t_sim - t_built) if t_sim > t_built else None
+        ),
         "site_dir": str(site.directory or site.dem),
     }
     _write_text(out_dir / "scenario.yaml", dump_scenario(scenario))
     _write_text(out_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")
     _write_text(out_dir / "timing.json", json.dumps(timing, indent=2, sort_keys=True) + "\n")
     return MissionResult(out_dir=out_dir, summary=summary, timing=timing, meshcat_url=url)
+
+
+_LOG_COLUMNS = {
+    "rover.pose": (
+        "x_m",
+        "y_m",
+        "z_m",
+        "roll_rad",
+        "pitch_rad",
+        "yaw_rad",
+        "vx_mps",
+        "vy_mps",
+        "vz_mps",
+        "wx_radps",
+        "wy_radps",
+        "wz_radps",
+    ),
+    "rover.imu": (
+        "gyro_x_radps",
+        "gyro_y_radps",
+        "gyro_z_radps",
+        "accel_x_mps2",
+        "accel_y_mps2",
+        "accel_z_mps2",
+    ),
+    "rover.star_tracker": ("qw", "qx", "qy", "qz"),
+    "rover.twist_command": ("vx_mps", "vy_mps", "wz_radps"),
+    "rover.energy": ("energy_J",),
+}
+_LOG_FILES = {
+    "rover.pose": "truth.csv",
+    "rover.imu": "imu.csv",
+    "rover.star_tracker": "star_tracker.csv",
+    "rover.encoder_angles": "encoders.csv",
+    "rover.wheel_state": "wheels.csv",
+    "rover.twist_command": "route.csv",
+    "rover.energy": "energy.csv",
+}
+
+
+def _write_csv(path: Path, columns, times, data) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "w") as f:
+        f.write(",".join(["t_s", *columns]) + "\n")
+        for k, t in enumerate(times):
+            f.write(",".join([f"{t:.6f}", *(f"{v:.9g}" for v in data[:, k])]) + "\n")
+    os.replace(tmp, path)
+
+
+def _write_rover_logs(out_dir: Path, loggers, root, scenario) -> dict:
+    """Writes the rover CSV logs; returns a deterministic summary of the traverse."""
+    from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
+
+    wheels = ("fl", "fr", "rl", "rr")
+    cols = dict(_LOG_COLUMNS)
+    cols["rover.encoder_angles"] = tuple(f"{w}_angle_rad" for w in wheels)
+    cols["rover.wheel_state"] = tuple(f"{w}_{f}" for w in wheels for f in WHEEL_STATE_FIELDS)
+    logs = {}
+    for name, logger in loggers.items():
+        log = logger.FindLog(root)
+        logs[name] = (log.sample_times(), log.data())
+        if name in _LOG_FILES:
+            _write_csv(out_dir / _LOG_FILES[name], cols[name], *logs[name])
+    t, pose = logs["rover.pose"]
+    xy = pose[:2]
+    dist = float(np.sum(np.linalg.norm(np.diff(xy, axis=1), axis=0))) if len(t) > 1 else 0.0
+    _, ws = logs["rover.wheel_state"]
+    nf = len(WHEEL_STATE_FIELDS)
+    slip = ws[2::nf]
+    moving = np.abs(pose[6]) + np.abs(pose[7]) > 0.02
+    return {
+        "distance_m": round(dist, 6),
+        "final_pose": [round(float(v), 6) for v in pose[:6, -1]],
+        "max_tilt_deg": round(float(np.degrees(np.max(np.hypot(pose[3], pose[4])))), 4),
+        "max_sinkage_m": round(float(np.max(ws[0::nf])), 6),
+        "mean_slip_moving": round(float(np.mean(slip[:, moving])), 6) if moving.any() else 0.0,
+        "energy_J": round(float(logs["rover.energy"][1][0, -1]), 4),
+        "logs": sorted(_LOG_FILES.values()),
+    }

@@ -23,6 +23,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 
 SFD_LAWS = ("trask", "viper", "powerlaw")
 
@@ -93,6 +94,55 @@ class TerrainViewConfig:
 
 
 @dc.dataclass
+class RouteSegment:
+    """One piece of an open-loop route: a body twist held for a duration.
+
+    Attributes:
+        duration_s: how long (s). vx_mps, vy_mps: chassis-frame velocity (m/s).
+        wz_radps: yaw rate (rad/s).
+    """
+
+    duration_s: float = 1.0
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+    wz_radps: float = 0.0
+
+
+def _default_route() -> list:
+    # About 100 m: straight, a gentle left arc, straight (0.2 m/s, RP-class speed).
+    return [
+        RouteSegment(duration_s=2.0),
+        RouteSegment(duration_s=250.0, vx_mps=0.2),
+        RouteSegment(duration_s=100.0, vx_mps=0.2, wz_radps=0.01),
+        RouteSegment(duration_s=250.0, vx_mps=0.2),
+    ]
+
+
+@dc.dataclass
+class RoverConfig:
+    """The rover, its soil and its route.
+
+    Attributes:
+        enabled: add a rover to the mission diagram.
+        description: the rover model (see lunar_drake/models/rover_description.py; the
+            default is the explicit-steer RP/KRex2-class preset).
+        soil: soil preset name (lunar_regolith, grc1).
+        spawn_x_m, spawn_y_m, spawn_yaw_deg: start pose on the site (site frame).
+        route: open-loop route (until the autonomy stack drives).
+        log_period_s: period of the CSV logs (s).
+    """
+
+    enabled: bool = True
+    description: RoverDescription = dc.field(default_factory=krex2_rp)
+    soil: str = "lunar_regolith"
+    spawn_x_m: float = 0.0
+    spawn_y_m: float = 0.0
+    spawn_yaw_deg: float = 0.0
+    route: list[RouteSegment] = dc.field(default_factory=_default_route)
+    log_period_s: float = 0.1
+
+
+@dc.dataclass
 class Scenario:
     """Everything a run needs. Field names are the YAML keys."""
 
@@ -101,6 +151,7 @@ class Scenario:
     site: SiteConfig = dc.field(default_factory=SiteConfig)
     terrain: TerrainConfig = dc.field(default_factory=TerrainConfig)
     terrain_view: TerrainViewConfig = dc.field(default_factory=TerrainViewConfig)
+    rover: RoverConfig = dc.field(default_factory=RoverConfig)
     simulator_config: SimulatorConfig = dc.field(
         default_factory=lambda: SimulatorConfig(
             max_step_size=0.01, accuracy=1.0e-3, use_error_control=False, target_realtime_rate=0.0
@@ -108,7 +159,7 @@ class Scenario:
     )
     plant_config: MultibodyPlantConfig = dc.field(
         default_factory=lambda: MultibodyPlantConfig(
-            time_step=0.002, discrete_contact_approximation=""
+            time_step=0.01, discrete_contact_approximation="sap"
         )
     )
     visualization: VisualizationConfig = dc.field(
@@ -244,5 +295,25 @@ def validate_scenario(s: Scenario) -> None:
         unit=" s",
     )
     _check("plant_config.time_step", s.plant_config.time_step, 0.0, 1.0, unit=" s")
+    r = s.rover
+    try:
+        r.description.validate()
+    except ConfigError as exc:
+        raise type(exc)(f"rover.description: {exc}") from exc
+    from lunar_drake.dynamics.terramechanics import SOIL_PRESETS
+
+    if r.soil not in SOIL_PRESETS:
+        raise ConfigError(
+            f"rover.soil = {r.soil!r} is unknown; choose one of {sorted(SOIL_PRESETS)}"
+        )
+    _check("rover.spawn_yaw_deg", r.spawn_yaw_deg, -360.0, 360.0, unit=" deg")
+    _check("rover.log_period_s", r.log_period_s, 0.0, 100.0, lo_open=True, unit=" s")
+    for k, seg in enumerate(r.route):
+        _check(f"rover.route[{k}].duration_s", seg.duration_s, 0.0, 1.0e6, unit=" s")
+        _check(f"rover.route[{k}].vx_mps", seg.vx_mps, -5.0, 5.0, unit=" m/s")
+        _check(f"rover.route[{k}].vy_mps", seg.vy_mps, -5.0, 5.0, unit=" m/s")
+        _check(f"rover.route[{k}].wz_radps", seg.wz_radps, -2.0, 2.0, unit=" rad/s")
+    if s.plant_config.time_step <= 0 and r.enabled:
+        raise ConfigError("plant_config.time_step must be > 0 (a discrete SAP plant) with a rover")
     if not math.isfinite(s.simulation_duration):
         raise OutOfRangeError(f"simulation_duration = {s.simulation_duration!r} must be finite")

@@ -1,0 +1,430 @@
+"""Slip versus slope (paper section 6, Figs. 22-24), with the terramechanics reference.
+
+For each rover, slope and seed: a planar ramp z = x tan(slope) (site frame), the rover
+spawned at its base heading upslope (seed: a small lateral offset and heading error),
+wheels driven at a constant commanded speed after a settling pause. Slip over the
+steady part of the climb (from 10% of the distance to the end) is
+
+    slip = 1 - ground-truth distance / dead-reckoned distance,
+
+with the ground-truth distance signed along the rover's heading (sliding back gives
+slip > 1),
+
+with the dead-reckoned distance = mean wheel-encoder angle change x wheel radius.
+``reference_slip`` is the steady-state slip at which the terramechanics drawbar pull
+balances the downslope weight for the same wheel loads and soil
+(:func:`lunar_drake.dynamics.terramechanics.reference_slip`), computed by the core
+independently of the driving simulation. The wheel loads are the static normal loads
+on the slope, read with the rover at rest and braked on the ramp during the settling
+pause (so the front-to-rear load transfer of the suspension is included; the braking
+force at rest equals the traction of a steady climb); level-ground loads are recorded
+too. params.json holds both, with the soil and wheel, so anyone can recompute it.
+Where no slip below 0.99 balances it (the rover cannot climb), the reference is 1
+(wheels spin out) and ``immobilized`` is true; the simulated rover then slides back
+(slip > 1).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lunar_drake import rng
+from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.errors import ConfigError, OutOfRangeError
+
+ROVER_CHOICES = {"skid": "husky_rp", "explicit": "krex2_rp"}
+CSV_COLUMNS = (
+    "rover",
+    "slope_deg",
+    "seed",
+    "slip",
+    "reference_slip",
+    "immobilized",
+    "sinkage_m",
+    "energy_J",
+    "distance_m",
+    "time_s",
+)
+
+
+@dc.dataclass(frozen=True)
+class SlipCase:
+    """One run. ``rover`` is skid/explicit or a preset name; speeds in m/s."""
+
+    rover: str
+    slope_deg: float
+    seed: int
+    distance_m: float = 5.0
+    speed_mps: float = 0.1
+    soil: str = "lunar_regolith"
+    time_step_s: float = 0.01
+    settle_s: float = 2.0
+
+    def __post_init__(self):
+        if self.rover not in (*ROVER_CHOICES, *ROVER_CHOICES.values()):
+            raise ConfigError(
+                f"rover = {self.rover!r} is unknown; choose one of {sorted(ROVER_CHOICES)}"
+            )
+        if not 0.0 <= self.slope_deg <= 40.0:
+            raise OutOfRangeError(f"slope_deg = {self.slope_deg!r}; allowed [0, 40] deg")
+        if not 0.2 <= self.distance_m <= 1000.0:
+            raise OutOfRangeError(f"distance_m = {self.distance_m!r}; allowed [0.2, 1000] m")
+        if not 0.01 <= self.speed_mps <= 2.0:
+            raise OutOfRangeError(f"speed_mps = {self.speed_mps!r}; allowed [0.01, 2] m/s")
+        if self.soil not in tm.SOIL_PRESETS:
+            raise ConfigError(
+                f"soil = {self.soil!r} is unknown; choose one of {sorted(tm.SOIL_PRESETS)}"
+            )
+
+
+def _description(rover: str):
+    from lunar_drake.models.rover_description import rover_preset
+
+    return rover_preset(ROVER_CHOICES.get(rover, rover))
+
+
+def ramp_heightfield(
+    *, slope_deg: float, length_m: float, width_m: float = 8.0, resolution_m: float = 0.05
+):
+    """A planar ramp z = (x - x0) tan(slope) whose base is 3 m inside the west edge."""
+    from lunar_drake.terrain.heightfield import Heightfield
+
+    nc = math.ceil((length_m + 8.0) / resolution_m)
+    nr = math.ceil(width_m / resolution_m)
+    x = (np.arange(nc) + 0.5 - 0.5 * nc) * resolution_m
+    z = np.tile((x * math.tan(math.radians(slope_deg))).astype(np.float32), (nr, 1))
+    return Heightfield.from_array(z, resolution_m=resolution_m)
+
+
+def reference_for(case: SlipCase, *, wheel_loads_N, wheel, soil) -> tuple[float, bool]:
+    """(reference slip, immobilized) for a case."""
+    try:
+        s = tm.reference_slip(
+            slope_rad=math.radians(case.slope_deg),
+            wheel_loads_N=wheel_loads_N,
+            wheel=wheel,
+            soil=soil,
+        )
+        return float(s), False
+    except tm.ImmobilizedError:
+        return 1.0, True
+
+
+def run_slip_case(case: SlipCase) -> dict:
+    """Simulates one case and returns its row (see :data:`CSV_COLUMNS`) and parameters."""
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+    from lunar_drake.diagrams.rover import add_rover_model, spawn_pose, wire_rover
+    from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
+    from lunar_drake.systems.energy_meter import EnergyMeter
+    from lunar_drake.systems.rover_kinematics import TwistSchedule
+    from lunar_drake.systems.terrain_source import TerrainSource
+
+    desc = _description(case.rover)
+    soil = tm.soil_preset(case.soil)
+    hf = ramp_heightfield(slope_deg=case.slope_deg, length_m=case.distance_m + 2.0)
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=case.time_step_s, discrete_contact_approximation="sap"),
+        builder,
+    )
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -LUNAR_GRAVITY_MPS2])
+    rover = add_rover_model(plant, description=desc)
+    plant.Finalize()
+    terrain = builder.AddSystem(TerrainSource(heightfield=hf))
+    h = wire_rover(
+        builder,
+        plant=plant,
+        rover=rover,
+        heightfield_port=terrain.heightfield_output,
+        soil=soil,
+        seed=case.seed,
+    )
+    nominal_t = case.distance_m / case.speed_mps
+    t_end = case.settle_s + 3.0 * nominal_t + 10.0
+    route = builder.AddSystem(
+        TwistSchedule(segments=[(case.settle_s, 0.0, 0.0, 0.0), (t_end, case.speed_mps, 0.0, 0.0)])
+    )
+    builder.Connect(route.twist_output, h.kinematics.twist_input)
+    zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
+    builder.Connect(zero.get_output_port(), h.kinematics.gimbal_input)
+    meter = builder.AddSystem(
+        EnergyMeter(
+            actuation_indices=[
+                plant.get_joint_actuator(a.index()).input_start() for a in rover.drive_actuators
+            ],
+            velocity_indices=[
+                plant.num_positions() + j.velocity_start() for j in rover.drive_joints
+            ],
+            n_actuation=plant.num_actuators(),
+            n_state=plant.num_multibody_states(),
+            period_s=case.time_step_s,
+        )
+    )
+    builder.Connect(plant.get_net_actuation_output_port(), meter.actuation_input)
+    builder.Connect(plant.get_state_output_port(), meter.state_input)
+    period = float(os.environ.get("LD_SLIP_LOG", "0.05"))
+    log_pose = LogVectorOutput(h.truth.pose_output, builder, period)
+    log_enc = LogVectorOutput(h.encoders.GetOutputPort("angles"), builder, period)
+    log_wheel = LogVectorOutput(h.contact.wheel_state_output, builder, period)
+    log_e = LogVectorOutput(meter.energy_output, builder, period)
+    diagram = builder.Build()
+    sim = Simulator(diagram)
+    ctx = sim.get_mutable_context()
+    # Seeded start: lateral offset and heading error (deterministic per seed).
+    g = rng.generator(case.seed, "slip_study/spawn")
+    y0 = float(g.uniform(-0.5, 0.5))
+    yaw0 = math.radians(float(g.normal(0.0, 0.5)))
+    x0 = hf.bounds.left + 3.0
+    X = spawn_pose(heightfield=hf, rover=rover, x_m=x0, y_m=y0, yaw_rad=yaw0, soil=soil)
+    plant.SetFloatingBaseBodyPoseInWorldFrame(
+        plant.GetMyMutableContextFromRoot(ctx), rover.chassis, X
+    )
+    start = np.array(X.translation())
+    sim.Initialize()
+    # Advance in chunks until the rover has climbed the distance (or time runs out).
+    t = 0.0
+    pose_port = h.truth.pose_output
+    while t < t_end:
+        t = min(t + 2.0, t_end)
+        sim.AdvanceTo(t)
+        p = pose_port.Eval(h.truth.GetMyContextFromRoot(ctx))[:3]
+        if np.linalg.norm(p - start) >= case.distance_m:
+            break
+    nf = 6
+    times = log_pose.FindLog(ctx).sample_times()
+    pose = log_pose.FindLog(ctx).data()
+    enc = log_enc.FindLog(ctx).data()
+    ws = log_wheel.FindLog(ctx).data()
+    energy = log_e.FindLog(ctx).data()[0]
+    travelled = np.linalg.norm(pose[:3] - start[:, None], axis=0)
+    driving = times >= case.settle_s
+    i0 = (
+        int(np.argmax(driving & (travelled >= 0.1 * case.distance_m)))
+        if (driving & (travelled >= 0.1 * case.distance_m)).any()
+        else int(np.argmax(driving))
+    )
+    i1 = len(times) - 1
+    # Signed progress along the rover's heading at i0 (a rover sliding back counts < 0).
+    from pydrake.math import RollPitchYaw
+
+    fwd = RollPitchYaw(pose[3:6, i0]).ToRotationMatrix().matrix()[:, 0]
+    gt = float(np.dot(pose[:3, i1] - pose[:3, i0], fwd))
+    dr = float(np.mean(enc[:, i1] - enc[:, i0]) * desc.wheel_radius_m)
+    slip = 1.0 - gt / dr if dr > 1e-9 else float("nan")
+    wheel = tm.WheelParams(radius_m=desc.wheel_radius_m, width_m=desc.wheel_width_m)
+    level_loads = np.asarray(rover.static_wheel_load_N, dtype=float)
+    # Static normal loads on the slope: the rover at rest, braked by its wheel servos,
+    # over the last 0.5 s of the settling pause (the same force balance as a steady
+    # climb: the braking force equals the traction; load transfer included).
+    rest = (times > case.settle_s - 0.5) & (times <= case.settle_s)
+    slope_loads = ws[1::nf][:, rest].mean(axis=1)
+    cos_t = math.cos(math.radians(case.slope_deg))
+    ref, immobilized = reference_for(
+        case, wheel_loads_N=slope_loads / cos_t, wheel=wheel, soil=soil
+    )
+    row = {
+        "rover": case.rover,
+        "slope_deg": case.slope_deg,
+        "seed": case.seed,
+        "slip": slip,
+        "reference_slip": ref,
+        "immobilized": immobilized,
+        "sinkage_m": float(np.mean(ws[0::nf, i0 : i1 + 1])),
+        "energy_J": float(energy[i1] - energy[i0]),
+        "distance_m": float(travelled[i1]),
+        "time_s": float(times[i1]),
+    }
+    params = {
+        "rover": case.rover,
+        "preset": desc.name,
+        "soil": dc.asdict(soil),
+        "wheel_radius_m": desc.wheel_radius_m,
+        "wheel_width_m": desc.wheel_width_m,
+        "static_wheel_load_level_N": [float(v) for v in level_loads],
+        "wheels": ["fl", "fr", "rl", "rr"],
+        "gravity_mps2": LUNAR_GRAVITY_MPS2,
+        "speed_mps": case.speed_mps,
+        "time_step_s": case.time_step_s,
+    }
+    return {
+        "row": row,
+        "params": params,
+        "slope_loads": {
+            "rover": case.rover,
+            "slope_deg": case.slope_deg,
+            "seed": case.seed,
+            "static_wheel_load_on_slope_N": [float(v) for v in slope_loads],
+        },
+    }
+
+
+def parse_slopes(text: str) -> list[float]:
+    """'A:B:STEP' (inclusive) or a comma list -> slopes in degrees."""
+    try:
+        if ":" in text:
+            a, b, step = (float(v) for v in text.split(":"))
+            if step <= 0 or b < a:
+                raise ValueError
+            n = math.floor((b - a) / step + 1e-9) + 1
+            return [round(a + k * step, 9) for k in range(n)]
+        return [float(v) for v in text.split(",")]
+    except ValueError as exc:
+        raise ConfigError(
+            f"--slopes {text!r} must be A:B:STEP with STEP > 0 and B >= A, or a comma list"
+        ) from exc
+
+
+def run_slip_study(
+    *,
+    rovers,
+    slopes_deg,
+    distance_m: float,
+    seeds: int,
+    out_dir,
+    soil: str = "lunar_regolith",
+    speed_mps: float = 0.1,
+    workers: int = 1,
+    progress: bool = True,
+) -> list[dict]:
+    """Runs every (rover, slope, seed) case and writes slip.csv, params.json and slip.png.
+
+    Cases run in parallel processes with dask when ``workers > 1``; results do not depend
+    on the worker count.
+    """
+    if seeds < 1:
+        raise OutOfRangeError(f"seeds = {seeds!r}; must be >= 1")
+    cases = [
+        SlipCase(
+            rover=r, slope_deg=s, seed=k, distance_m=distance_m, speed_mps=speed_mps, soil=soil
+        )
+        for r in rovers
+        for s in slopes_deg
+        for k in range(seeds)
+    ]
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if workers > 1:
+        import dask
+
+        results = dask.compute(
+            *[dask.delayed(run_slip_case)(c) for c in cases],
+            scheduler="processes",
+            num_workers=workers,
+        )
+    else:
+        results = []
+        it = cases
+        if progress:
+            from tqdm.auto import tqdm
+
+            it = tqdm(cases, desc="slip study", unit="run")
+        for c in it:
+            results.append(run_slip_case(c))
+    rows = [r["row"] for r in results]
+    params = {}
+    for r in results:
+        params.setdefault(r["params"]["rover"], r["params"])
+    _write_csv(out_dir / "slip.csv", rows)
+    tmp = out_dir / f".params.json.tmp-{os.getpid()}"
+    doc = {
+        "rovers": params,
+        "slope_loads": [r["slope_loads"] for r in results],
+        "method": __doc__.strip(),
+    }
+    tmp.write_text(json.dumps(doc, indent=2) + "\n")
+    os.replace(tmp, out_dir / "params.json")
+    plot_slip(rows, path=out_dir / "slip.png")
+    return rows
+
+
+def _write_csv(path: Path, rows) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    with open(tmp, "w") as f:
+        f.write(",".join(CSV_COLUMNS) + "\n")
+        for r in rows:
+            vals = []
+            for c in CSV_COLUMNS:
+                v = r[c]
+                vals.append(
+                    f"{v:.6f}"
+                    if isinstance(v, float)
+                    else str(v).lower()
+                    if isinstance(v, bool)
+                    else str(v)
+                )
+            f.write(",".join(vals) + "\n")
+    os.replace(tmp, path)
+
+
+def summarize(rows) -> list[dict]:
+    """Per (rover, slope): mean, min, max slip across seeds and the reference."""
+    out = []
+    keys = sorted({(r["rover"], r["slope_deg"]) for r in rows})
+    for rover, slope in keys:
+        s = np.array([r["slip"] for r in rows if r["rover"] == rover and r["slope_deg"] == slope])
+        ref = next(
+            r["reference_slip"] for r in rows if r["rover"] == rover and r["slope_deg"] == slope
+        )
+        out.append(
+            {
+                "rover": rover,
+                "slope_deg": slope,
+                "mean": float(s.mean()),
+                "min": float(s.min()),
+                "max": float(s.max()),
+                "reference": ref,
+            }
+        )
+    return out
+
+
+def plot_slip(rows, *, path) -> Path:
+    """slip.png: mean and spread of slip versus slope per rover, with the reference."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    summ = summarize(rows)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for k, rover in enumerate(sorted({r["rover"] for r in summ})):
+        ss = [r for r in summ if r["rover"] == rover]
+        x = np.array([r["slope_deg"] for r in ss])
+        m = np.array([r["mean"] for r in ss]) * 100
+        lo = np.array([r["min"] for r in ss]) * 100
+        hi = np.array([r["max"] for r in ss]) * 100
+        ref = np.array([r["reference"] for r in ss]) * 100
+        color = f"C{k}"
+        ax.errorbar(
+            x,
+            m,
+            yerr=[m - lo, hi - m],
+            fmt="o",
+            color=color,
+            capsize=3,
+            label=f"{rover}: simulated (mean, min-max over seeds)",
+        )
+        ax.plot(x, ref, "--", color=color, label=f"{rover}: terramechanics reference")
+    ax.set_xlabel("slope (deg)")
+    ax.set_ylabel("slip (%)")
+    ax.set_ylim(0, 105)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Wheel slip vs slope (planar ramps)")
+    fig.tight_layout()
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path

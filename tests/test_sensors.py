@@ -1,0 +1,360 @@
+"""Localization sensors: IMU, star tracker and wheel encoder cores and Drake systems."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.math import SpatialVelocity
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import RevoluteJoint, SpatialInertia, UnitInertia
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from lunar_drake.dynamics import sensor_models as sm
+from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.rng import stream_key
+from lunar_drake.systems.imu import Imu
+from lunar_drake.systems.star_tracker import StarTracker
+from lunar_drake.systems.wheel_encoders import WheelEncoders, wheel_angle_selector
+
+ARCSEC = math.pi / 180 / 3600
+NO_BIAS = dict(
+    gyro_bias_initial_sigma=0.0,
+    gyro_bias_random_walk=0.0,
+    accel_bias_initial_sigma=0.0,
+    accel_bias_random_walk=0.0,
+)
+
+# ----------------------------------------------------------------------------- IMU core
+
+
+@pytest.mark.parametrize("rate", [100.0, 400.0])
+def test_imu_white_noise_std_is_density_times_sqrt_rate(rate):
+    cfg = sm.ImuConfig(sample_rate_hz=rate)
+    n = sm.imu_white_noise(stream_key(5, "imu"), np.arange(20000), config=cfg)
+    assert n.shape == (20000, 6)
+    expected = np.repeat([cfg.gyro_noise_density, cfg.accel_noise_density], 3) * math.sqrt(rate)
+    np.testing.assert_allclose(n.std(axis=0), expected, rtol=0.10)
+    assert np.all(np.abs(n.mean(axis=0)) < 4 * expected / math.sqrt(20000))
+    c = np.corrcoef(n.T)
+    assert np.all(np.abs(c[~np.eye(6, dtype=bool)]) < 0.04)  # channels independent
+    assert abs(np.corrcoef(n[:-1, 0], n[1:, 0])[0, 1]) < 0.04  # and white
+
+
+def test_imu_bias_random_walk_variance_grows_linearly():
+    cfg = sm.ImuConfig(sample_rate_hz=50.0)
+    steps = 400
+    walks = np.array(
+        [
+            np.cumsum(sm.imu_bias_increment(stream_key(s, "imu"), np.arange(steps), config=cfg), 0)
+            for s in range(1500)
+        ]
+    )  # (seeds, steps, 6): bias(k+1) - bias(0)
+    q = np.repeat([cfg.gyro_bias_random_walk, cfg.accel_bias_random_walk], 3)
+    times = []
+    for k in (50, 100, 200, 400):
+        t = k / cfg.sample_rate_hz
+        var = walks[:, k - 1].var(axis=0)
+        np.testing.assert_allclose(var, q**2 * t, rtol=0.12)
+        times.append(var / q**2)
+    times = np.array(times)
+    np.testing.assert_allclose(times[1:] / times[:-1], 2.0, rtol=0.15)  # linear in time
+    init = np.array([sm.imu_initial_bias(stream_key(s, "imu"), config=cfg) for s in range(2000)])
+    np.testing.assert_allclose(init.std(axis=0), cfg.bias_initial_sigma, rtol=0.10)
+
+
+def test_imu_ideal_specific_force_and_lever_arm():
+    level = sm.imu_ideal(
+        R_WB=np.eye(3), w_WB_W=np.zeros(3), alpha_WB_W=np.zeros(3), a_WBo_W=np.zeros(3)
+    )
+    np.testing.assert_allclose(level, [0, 0, 0, 0, 0, 1.62])
+    R = RollPitchYaw(0.0, 0.4, 0.0).ToRotationMatrix().matrix()  # pitched nose down 0.4 rad
+    tilt = sm.imu_ideal(R_WB=R, w_WB_W=np.zeros(3), alpha_WB_W=np.zeros(3), a_WBo_W=np.zeros(3))
+    np.testing.assert_allclose(tilt[3:], [-1.62 * math.sin(0.4), 0, 1.62 * math.cos(0.4)])
+    falling = sm.imu_ideal(
+        R_WB=R, w_WB_W=np.zeros(3), alpha_WB_W=np.zeros(3), a_WBo_W=np.array(sm.LUNAR_GRAVITY_W)
+    )
+    np.testing.assert_allclose(falling, 0.0, atol=1e-15)
+    w = np.array([0.0, 0.0, 2.0])
+    spin = sm.imu_ideal(
+        R_WB=np.eye(3),
+        w_WB_W=w,
+        alpha_WB_W=np.zeros(3),
+        a_WBo_W=np.zeros(3),
+        p_BS=[0.5, 0, 0],
+        gravity_W=np.zeros(3),
+    )
+    np.testing.assert_allclose(spin, [0, 0, 2.0, -2.0, 0, 0])  # centripetal w^2 r inwards
+
+
+# ----------------------------------------------------------------- rotations, star tracker
+
+
+def test_rotation_helpers_round_trip():
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(200, 3))
+    v *= (rng.uniform(0, math.pi - 1e-6, size=200) / np.linalg.norm(v, axis=1))[:, None]
+    v[0] = 0.0
+    v[1] = [math.pi - 1e-9, 0, 0]
+    R = sm.rotation_exp(v)
+    for i in (1, 2, 3):
+        ang = np.linalg.norm(v[i])
+        drake_R = RotationMatrix(AngleAxis(ang, v[i] / ang)).matrix()
+        np.testing.assert_allclose(R[i], drake_R, atol=1e-12)
+        drake_q = RotationMatrix(R[i]).ToQuaternion().wxyz()
+        q = sm.quaternion_from_rotation_matrix(R[i])
+        np.testing.assert_allclose(q, drake_q * np.sign(drake_q[0]), atol=1e-12)
+    q = sm.quaternion_from_rotation_matrix(R)
+    assert np.all(q[:, 0] >= 0)
+    np.testing.assert_allclose(sm.rotation_matrix_from_quaternion(q), R, atol=1e-12)
+    np.testing.assert_allclose(sm.rotation_log(R)[2:], v[2:], atol=1e-9)
+    np.testing.assert_allclose(sm.rotation_log(R[:1]), 0.0, atol=1e-15)
+
+
+def test_star_tracker_error_statistics():
+    cfg = sm.StarTrackerConfig(cross_boresight_sigma_arcsec=5.0, roll_sigma_arcsec=40.0)
+    key = stream_key(2, "st")
+    R_WB = RollPitchYaw(0.2, -0.1, 2.0).ToRotationMatrix().matrix()
+    R_BS = RollPitchYaw(math.pi / 2, 0.3, 0.0).ToRotationMatrix().matrix()  # boresight sideways
+    n = 8000
+    q = sm.star_tracker_measurement(R_WB, key, np.arange(n), config=cfg, R_BS=R_BS)
+    assert q.shape == (n, 4)
+    np.testing.assert_array_equal(
+        q[17], sm.star_tracker_measurement(R_WB, key, 17, config=cfg, R_BS=R_BS)
+    )
+    R_meas = sm.rotation_matrix_from_quaternion(q)
+    err_S = sm.rotation_log((R_WB @ R_BS).T @ R_meas @ R_BS)  # error in the sensor frame
+    np.testing.assert_allclose(err_S.std(axis=0) / ARCSEC, [5.0, 5.0, 40.0], rtol=0.10)
+    assert np.all(np.abs(err_S.mean(axis=0)) < 4 * cfg.sigma_rad / math.sqrt(n))
+    np.testing.assert_allclose(
+        err_S, sm.star_tracker_error_angles(key, np.arange(n), config=cfg), atol=1e-12
+    )
+
+
+# ------------------------------------------------------------------------------- encoders
+
+
+def test_encoder_quantization_round_trip():
+    cfg = sm.WheelEncoderConfig(counts_per_revolution=4096)
+    res = 2 * math.pi / 4096
+    angles = np.random.default_rng(1).uniform(-50, 50, size=(1000, 4))
+    counts = sm.encoder_counts(angles, config=cfg)
+    assert np.array_equal(counts, np.round(counts))
+    back = sm.encoder_angles(counts, config=cfg)
+    assert np.all(np.abs(back - angles) <= res / 2 + 1e-12)
+    assert np.array_equal(sm.encoder_counts(back, config=cfg), counts)
+    np.testing.assert_array_equal(
+        sm.encoder_counts([0.0, 2 * math.pi, -math.pi], config=cfg), [0, 4096, -2048]
+    )
+    noisy = sm.WheelEncoderConfig(angle_noise_sigma_rad=0.01)
+    with pytest.raises(ConfigError, match="key"):
+        sm.encoder_counts(angles, config=noisy)
+    c = sm.encoder_counts(np.zeros((2000, 1)), config=noisy, key=3, step=np.arange(2000))
+    assert c.std() * res == pytest.approx(0.01, rel=0.1)
+    with pytest.raises(OutOfRangeError, match="counts_per_revolution"):
+        sm.WheelEncoderConfig(counts_per_revolution=0)
+
+
+def test_configs_validate():
+    with pytest.raises(OutOfRangeError, match="gyro_noise_density"):
+        sm.ImuConfig(gyro_noise_density=-1.0)
+    with pytest.raises(OutOfRangeError, match="sample_rate_hz"):
+        sm.StarTrackerConfig(sample_rate_hz=0.0)
+    with pytest.raises(OutOfRangeError, match="sample index"):
+        sm.sample_index(-1.0, 10.0)
+
+
+# ------------------------------------------------------------------------ Drake systems
+
+RATE = 100.0
+
+
+def _build(*, weld_pose=None, gravity=(0.0, 0.0, 0.0), imus=(), star_tracker=None):
+    """Plant with one body ('box': sphere inertia), free or welded at ``weld_pose``."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, 0.0)
+    body = plant.AddRigidBody("box", SpatialInertia(3.0, np.zeros(3), UnitInertia.SolidSphere(0.3)))
+    if weld_pose is not None:
+        plant.WeldFrames(plant.world_frame(), body.body_frame(), weld_pose)
+    plant.mutable_gravity_field().set_gravity_vector(gravity)
+    plant.Finalize()
+    systems = []
+    for kw in imus:
+        imu = builder.AddSystem(Imu(body_index=body.index(), gravity_W=gravity, **kw))
+        builder.Connect(plant.get_body_poses_output_port(), imu.body_poses_input)
+        builder.Connect(
+            plant.get_body_spatial_velocities_output_port(), imu.body_spatial_velocities_input
+        )
+        builder.Connect(
+            plant.get_body_spatial_accelerations_output_port(),
+            imu.body_spatial_accelerations_input,
+        )
+        systems.append(imu)
+    if star_tracker is not None:
+        st = builder.AddSystem(StarTracker(body_index=body.index(), **star_tracker))
+        builder.Connect(plant.get_body_poses_output_port(), st.body_poses_input)
+        systems.append(st)
+    diagram = builder.Build()
+    return diagram, plant, body, systems
+
+
+def _run(diagram, systems, rate, n, setup=None):
+    """Samples (n, ...) of each system's first output, read between sample times."""
+    sim = Simulator(diagram)
+    ctx = sim.get_mutable_context()
+    if setup is not None:
+        setup(ctx)
+    sim.Initialize()
+    ctxs = [s.GetMyContextFromRoot(ctx) for s in systems]
+    out = [[] for _ in systems]
+    for k in range(n):
+        sim.AdvanceTo((k + 0.5) / rate)
+        for o, s, c in zip(out, systems, ctxs, strict=True):
+            o.append(s.get_output_port(0).Eval(c).copy())
+    return [np.array(o) for o in out]
+
+
+def _spinning(plant, body, R_WB0, w_W):
+    def setup(ctx):
+        pc = plant.GetMyMutableContextFromRoot(ctx)
+        plant.SetFreeBodyPose(pc, body, RigidTransform(R_WB0, [0.0, 0.0, 1.0]))
+        plant.SetFreeBodySpatialVelocity(pc, body, SpatialVelocity(w_W, np.zeros(3)))
+
+    return setup
+
+
+def test_imu_on_spinning_body_gyro_mean_noise_and_lever_arm():
+    cfg = sm.ImuConfig(sample_rate_hz=RATE, **NO_BIAS)
+    p_BS = np.array([0.2, -0.1, 0.05])
+    diagram, plant, body, (imu0, imu1) = _build(
+        imus=[
+            dict(seed=1, name="imu_a", config=cfg),
+            dict(seed=1, name="imu_b", config=cfg, X_BS=RigidTransform(p_BS)),
+        ]
+    )
+    R0 = RollPitchYaw(0.3, -0.5, 1.0).ToRotationMatrix()
+    w_W = np.array([0.1, -0.2, 0.3])
+    n = 400
+    a, b = _run(diagram, [imu0, imu1], RATE, n, _spinning(plant, body, R0, w_W))
+    # A sphere spins at constant w_W, so w_B = R_BW w_W stays R_B0W w_W.
+    w_B = R0.matrix().T @ w_W
+    sig = cfg.white_sigma
+    assert np.all(np.abs(a[:, :3].mean(0) - w_B) < 4 * sig[:3] / math.sqrt(n))
+    assert np.linalg.norm(w_B - w_W) > 0.1  # the test would catch a world-frame gyro
+    np.testing.assert_allclose(a[:, :3].std(0), sig[:3], rtol=0.15)
+    # no gravity, body origin at the centre of mass: accel reads only noise at Bo ...
+    assert np.all(np.abs(a[:, 3:].mean(0)) < 4 * sig[3:] / math.sqrt(n))
+    # ... and the centripetal acceleration w x (w x p) (in B) at the offset sensor
+    expected = np.cross(w_B, np.cross(w_B, p_BS))
+    assert np.all(np.abs(b[:, 3:].mean(0) - expected) < 4 * sig[3:] / math.sqrt(n))
+    assert np.linalg.norm(expected) > 20 * sig[3] / math.sqrt(n)
+    assert not np.array_equal(a[:, :3], b[:, :3])  # different names, different noise
+
+
+@pytest.mark.parametrize("rpy", [(0.0, 0.0, 0.0), (0.25, -0.4, 1.2)])
+def test_accelerometer_at_rest_reads_lunar_specific_force(rpy):
+    R_WB = RollPitchYaw(*rpy).ToRotationMatrix()
+    cfg = sm.ImuConfig(sample_rate_hz=RATE, **NO_BIAS)
+    diagram, _plant, _body, (imu,) = _build(
+        weld_pose=RigidTransform(R_WB, [1.0, 2.0, 0.3]),
+        gravity=sm.LUNAR_GRAVITY_W,
+        imus=[dict(seed=3, config=cfg)],
+    )
+    n = 200
+    (m,) = _run(diagram, [imu], RATE, n)
+    expected = R_WB.matrix().T @ np.array([0.0, 0.0, 1.62])
+    tol = 4 * cfg.white_sigma / math.sqrt(n)
+    assert np.all(np.abs(m[:, 3:].mean(0) - expected) < tol[3:])
+    assert np.all(np.abs(m[:, :3].mean(0)) < tol[:3])
+    if rpy == (0.0, 0.0, 0.0):
+        assert abs(m[:, 5].mean() - 1.62) < tol[5]
+
+
+def test_accelerometer_in_free_fall_reads_zero():
+    cfg = sm.ImuConfig(sample_rate_hz=RATE, **NO_BIAS)
+    diagram, plant, body, (imu,) = _build(
+        gravity=sm.LUNAR_GRAVITY_W, imus=[dict(seed=3, config=cfg)]
+    )
+    R0 = RollPitchYaw(0.4, 0.2, 0.0).ToRotationMatrix()
+    (m,) = _run(diagram, [imu], RATE, 100, _spinning(plant, body, R0, np.zeros(3)))
+    assert np.all(np.abs(m[:, 3:].mean(0)) < 4 * cfg.white_sigma[3:] / 10)
+
+
+def test_imu_is_deterministic_per_seed_and_carries_its_bias():
+    def run(seed):
+        diagram, plant, body, (imu,) = _build(imus=[dict(seed=seed, name="imu")])
+        R0 = RotationMatrix()
+        return _run(diagram, [imu], RATE, 60, _spinning(plant, body, R0, np.array([0, 0, 0.2])))[0]
+
+    a, b, c = run(7), run(7), run(8)
+    assert np.array_equal(a, b)
+    assert not np.any(a == c)
+    # default config has a bias: the gyro z mean is offset from the truth by the bias
+    cfg = sm.ImuConfig()
+    bias0 = sm.imu_initial_bias(stream_key(7, "imu"), config=cfg)
+    noise = sm.imu_white_noise(stream_key(7, "imu"), np.arange(60), config=cfg)
+    steps = sm.imu_bias_increment(stream_key(7, "imu"), np.arange(60), config=cfg)
+    bias = bias0 + np.concatenate([np.zeros((1, 6)), np.cumsum(steps, 0)[:-1]])
+    np.testing.assert_allclose(
+        a[:, :3] - bias[:, :3] - noise[:, :3], [[0, 0, 0.2]] * 60, atol=1e-12
+    )
+
+
+def test_star_tracker_system_tracks_attitude_with_configured_noise():
+    rate = 20.0
+    cfg = sm.StarTrackerConfig(sample_rate_hz=rate)
+    diagram, plant, body, (st,) = _build(star_tracker=dict(seed=4, config=cfg))
+    R0 = RollPitchYaw(0.1, 0.2, -0.7).ToRotationMatrix()
+    w_W = np.array([0.0, 0.05, 0.3])
+    n = 300
+    (q,) = _run(diagram, [st], rate, n, _spinning(plant, body, R0, w_W))
+    assert q.shape == (n, 4) and np.all(q[:, 0] >= 0)
+    # truth: rotation about the fixed axis w_W (sphere, torque free)
+    t = np.arange(n) / rate
+    R_true = sm.rotation_exp(t[:, None] * w_W) @ R0.matrix()
+    err_B = sm.rotation_log(np.swapaxes(R_true, 1, 2) @ sm.rotation_matrix_from_quaternion(q))
+    std = err_B.std(axis=0) / ARCSEC
+    np.testing.assert_allclose(std, [5.0, 5.0, 40.0], rtol=0.2)  # boresight = body z
+    assert np.all(np.abs(err_B).max(axis=0) < 4 * cfg.sigma_rad)
+
+
+def test_wheel_encoders_on_plant_joints():
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlantSceneGraph(builder, 0.0)
+    inertia = SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidCylinder(0.25, 0.1, [0, 1, 0]))
+    joints = []
+    for i in range(2):
+        wheel = plant.AddRigidBody(f"wheel{i}", inertia)
+        joints.append(
+            plant.AddJoint(
+                RevoluteJoint(f"axle{i}", plant.world_frame(), wheel.body_frame(), [0, 1, 0])
+            )
+        )
+    plant.mutable_gravity_field().set_gravity_vector([0, 0, 0])
+    plant.Finalize()
+    cfg = sm.WheelEncoderConfig(counts_per_revolution=4096, sample_rate_hz=20.0)
+    enc = builder.AddSystem(WheelEncoders(n_wheels=2, seed=0, config=cfg))
+    sel = builder.AddSystem(wheel_angle_selector(plant, joints[::-1]))  # reversed order
+    builder.Connect(plant.get_state_output_port(), sel.get_input_port())
+    builder.Connect(sel.get_output_port(), enc.wheel_angles_input)
+    diagram = builder.Build()
+    q0, w = np.array([0.3, -1.0]), np.array([1.5, -0.4])
+
+    def setup(ctx):
+        pc = plant.GetMyMutableContextFromRoot(ctx)
+        for j, a, v in zip(joints, q0, w, strict=True):
+            j.set_angle(pc, a)
+            j.set_angular_rate(pc, v)
+
+    (counts,) = _run(diagram, [enc], cfg.sample_rate_hz, 40, setup)
+    t = np.arange(40)[:, None] / cfg.sample_rate_hz
+    true = (q0 + w * t)[:, ::-1]
+    res = 2 * math.pi / 4096
+    assert np.array_equal(counts, np.round(counts))
+    assert np.all(np.abs(counts * res - true) <= res / 2 + 1e-9)
+    ctx = diagram.CreateDefaultContext()
+    enc_ctx = enc.GetMyContextFromRoot(ctx)
+    enc_ctx.SetDiscreteState([5.0, -7.0])
+    np.testing.assert_allclose(enc.angles_output.Eval(enc_ctx), [5 * res, -7 * res])

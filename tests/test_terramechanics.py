@@ -1,0 +1,482 @@
+"""Tests for lunar_drake.dynamics.terramechanics (pure numpy core)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.dynamics.terramechanics import (
+    GRC1,
+    LUNAR_GRAVITY_MPS2,
+    LUNAR_REGOLITH,
+    ImmobilizedError,
+    SoilParams,
+    WheelParams,
+    bekker_load,
+    compaction_resistance,
+    contact_damping,
+    contact_stiffness,
+    drawbar_pull,
+    normal_force,
+    reference_slip,
+    shear_stress,
+    slip_angle,
+    slip_ratio,
+    slip_vs_drawbar_curve,
+    slip_vs_slope_curve,
+    soil_preset,
+    static_sinkage,
+    travel_direction,
+    wheel_forces,
+)
+from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError
+
+WHEEL = WheelParams(radius_m=0.25, width_m=0.2)
+W_WHEEL = 50.0 * LUNAR_GRAVITY_MPS2  # 81 N: a ~50 kg-per-wheel rover on the Moon
+PRESETS = (LUNAR_REGOLITH, GRC1)
+
+
+# ------------------------------------------------------------------ hand-computed values
+def test_bekker_load_hand_computed():
+    # Lunar soil n = 1, k_c = 1400, k_phi = 820000; r = 0.25 m, b = 0.2 m:
+    # k_c + b k_phi = 1400 + 164000 = 165400 N/m^2; sqrt(2 r) = sqrt(0.5) = 0.70710678
+    # W = (3 - 1)/3 * 165400 * 0.70710678 * z^1.5 = 77970.3077 * z^1.5
+    # z = 0.01 m -> z^1.5 = 0.001 -> W = 77.9703077 N
+    assert bekker_load(0.01, wheel=WHEEL, soil=LUNAR_REGOLITH) == pytest.approx(77.9703077, 1e-8)
+    # n = 0.5, k_c = 1000, k_phi = 5e5: k_c + b k_phi = 1000 + 100000 = 101000
+    # W = 2.5/3 * 101000 * 0.70710678 * z^1 = 59514.8207 z -> z = 0.02: W = 1190.29641 N
+    soil = SoilParams(name="half", n=0.5, k_c=1000.0, k_phi=5.0e5)
+    assert bekker_load(0.02, wheel=WHEEL, soil=soil) == pytest.approx(1190.29641, 1e-8)
+    # Out of contact: zero.
+    assert bekker_load(-0.01, wheel=WHEEL, soil=LUNAR_REGOLITH) == 0.0
+
+
+def test_static_sinkage_hand_computed_and_round_trip():
+    # z = (W / 77970.3077)^(2/3); W = 81 N -> (1.038857e-3)^(2/3) = 0.01025740 m
+    z = static_sinkage(W_WHEEL, wheel=WHEEL, soil=LUNAR_REGOLITH)
+    assert z == pytest.approx(0.01025740, rel=1e-6)
+    loads = np.array([1.0, 20.0, 81.0, 500.0, 3000.0])
+    for soil in (*PRESETS, SoilParams(name="half", n=0.5, k_c=1000.0, k_phi=5.0e5)):
+        zz = static_sinkage(loads, wheel=WHEEL, soil=soil)
+        np.testing.assert_allclose(bekker_load(zz, wheel=WHEEL, soil=soil), loads, rtol=1e-12)
+        assert np.all(np.diff(zz) > 0)
+    assert static_sinkage(0.0, wheel=WHEEL, soil=LUNAR_REGOLITH) == 0.0
+
+
+def test_compaction_resistance_hand_computed():
+    # R_c = (k_c + b k_phi) z^(n+1)/(n+1) = 165400 * 0.01^2 / 2 = 165400 * 1e-4 / 2 = 8.27 N
+    assert compaction_resistance(0.01, wheel=WHEEL, soil=LUNAR_REGOLITH) == pytest.approx(8.27)
+    # n = 0.5: 101000 * 0.02^1.5 / 1.5 = 101000 * 0.00282843 / 1.5 = 190.447426 N
+    soil = SoilParams(name="half", n=0.5, k_c=1000.0, k_phi=5.0e5)
+    assert compaction_resistance(0.02, wheel=WHEEL, soil=soil) == pytest.approx(190.447426, 1e-8)
+    # wheel_forces uses the same R_c.
+    f = wheel_forces(slip=0.3, slip_angle=0.0, W=80.0, z=0.01, wheel=WHEEL, soil=LUNAR_REGOLITH)
+    assert float(f.resistance) == pytest.approx(8.27)
+
+
+def test_janosi_hanamoto_shear_hand_computed():
+    # sigma = 1000 Pa, j = K = 0.018 m, c = 170 Pa, phi = 35 deg (tan = 0.70020754):
+    # tau = (170 + 700.20754) * (1 - e^-1) = 870.20754 * 0.63212056 = 550.076075 Pa
+    tau = shear_stress(1000.0, 0.018, soil=LUNAR_REGOLITH)
+    assert tau == pytest.approx(550.076075, 1e-8)
+    assert shear_stress(1000.0, -0.018, soil=LUNAR_REGOLITH) == pytest.approx(-550.076075, 1e-8)
+    assert shear_stress(1000.0, 0.0, soil=LUNAR_REGOLITH) == 0.0
+    # Large displacement saturates at the Mohr-Coulomb strength 870.20754 Pa.
+    assert shear_stress(1000.0, 10.0, soil=LUNAR_REGOLITH) == pytest.approx(870.20754, 1e-7)
+
+
+# ------------------------------------------------------------------------ quadrature
+def _reference_integrals(s, beta, W, z, wheel, soil):
+    """Adaptive-quadrature (scipy.integrate.quad) version of the model, one wheel."""
+    r, b = wheel.radius_m, wheel.width_m
+    th1 = math.acos(1.0 - z / r)
+    thm = (soil.c1 + soil.c2 * s) * th1
+    th2 = -soil.rear_angle_ratio * th1
+    kk = soil.k_c / b + soil.k_phi
+
+    def sigma_raw(t):
+        if t >= thm:
+            return kk * r**soil.n * (math.cos(t) - math.cos(th1)) ** soil.n
+        ts = th1 - (t - th2) / (thm - th2) * (th1 - thm)
+        return kk * r**soil.n * (math.cos(ts) - math.cos(th1)) ** soil.n
+
+    def integral(fun):
+        opts = {"epsabs": 1e-14, "epsrel": 1e-12, "limit": 200}
+        return quad(fun, th2, thm, **opts)[0] + quad(fun, thm, th1, **opts)[0]
+
+    scale = W / (r * b * integral(lambda t: sigma_raw(t) * math.cos(t)))
+
+    def tau(t):
+        j = s * r * (math.sin(th1) - math.sin(t))
+        strength = soil.c + scale * sigma_raw(t) * math.tan(soil.phi)
+        return strength * (1.0 - math.exp(-abs(j) / soil.K)) * math.copysign(1.0, j)
+
+    def tau_y(t):
+        jy = r * (1.0 - s) * (th1 - t) * math.tan(abs(beta))
+        strength = soil.c + scale * sigma_raw(t) * math.tan(soil.phi)
+        return strength * (1.0 - math.exp(-jy / soil.K_y))
+
+    H = r * b * integral(lambda t: tau(t) * math.cos(t))
+    T = r * r * b * integral(tau)
+    Fy = -math.copysign(1.0, beta) * r * b * integral(tau_y)
+    return H, T, Fy
+
+
+@pytest.mark.parametrize(
+    "soil",
+    [
+        LUNAR_REGOLITH,
+        GRC1,
+        SoilParams(name="rebound", n=0.8, k_c=900.0, k_phi=1.5e6, rear_angle_ratio=0.3),
+    ],
+    ids=lambda s: s.name,
+)
+def test_fixed_quadrature_matches_adaptive_quad(soil):
+    z = 0.015
+    W = float(bekker_load(z, wheel=WHEEL, soil=soil))
+    for s, beta in ((0.05, 0.1), (0.3, -0.3), (0.9, 0.6), (-0.4, 0.2)):
+        H, T, Fy = _reference_integrals(s, beta, W, z, WHEEL, soil)
+        f = wheel_forces(slip=s, slip_angle=beta, W=W, z=z, wheel=WHEEL, soil=soil)
+        assert float(f.thrust) == pytest.approx(H, rel=2e-4, abs=1e-9)
+        assert float(f.torque) == pytest.approx(T, rel=2e-4, abs=1e-9)
+        assert float(f.lateral) == pytest.approx(Fy, rel=2e-4, abs=1e-9)
+
+
+# ----------------------------------------------------------------------- slip behaviour
+@pytest.mark.parametrize("soil", PRESETS, ids=lambda s: s.name)
+def test_zero_slip_gives_zero_traction_only_rolling_resistance(soil):
+    W = np.array([20.0, 81.0, 300.0])
+    z = static_sinkage(W, wheel=WHEEL, soil=soil)
+    f = wheel_forces(slip=0.0, slip_angle=0.0, W=W, z=z, wheel=WHEEL, soil=soil)
+    assert np.all(f.thrust == 0.0)
+    assert np.all(f.torque == 0.0)
+    assert np.all(f.lateral == 0.0)
+    np.testing.assert_allclose(f.resistance, compaction_resistance(z, wheel=WHEEL, soil=soil))
+    assert np.all(f.resistance > 0)
+    np.testing.assert_array_equal(f.drawbar_pull, -f.resistance)
+
+
+@pytest.mark.parametrize("soil", PRESETS, ids=lambda s: s.name)
+def test_thrust_monotone_in_slip(soil):
+    s = np.linspace(0.0, 0.9, 181)
+    for W in (20.0, W_WHEEL, 400.0):
+        z = static_sinkage(W, wheel=WHEEL, soil=soil)
+        f = wheel_forces(slip=s, slip_angle=0.0, W=W, z=z, wheel=WHEEL, soil=soil)
+        assert np.all(np.diff(f.thrust) > 0)
+        assert np.all(np.diff(f.torque) > 0)
+        # Bounded by the Mohr-Coulomb strength of the contact (W tan phi + c * area).
+        area = WHEEL.width_m * WHEEL.radius_m * math.acos(1 - z / WHEEL.radius_m)
+        assert f.thrust[-1] < W * math.tan(soil.phi) + soil.c * area
+    # Braking: negative slip gives negative thrust.
+    f = wheel_forces(slip=-0.3, slip_angle=0.0, W=81.0, z=0.0103, wheel=WHEEL, soil=soil)
+    assert float(f.thrust) < 0 and float(f.torque) < 0
+
+
+@pytest.mark.parametrize("soil", PRESETS, ids=lambda s: s.name)
+def test_drawbar_pull_crosses_zero_at_small_positive_slip(soil):
+    s = np.linspace(0.0, 0.99, 991)
+    dp = drawbar_pull(s, W=W_WHEEL, wheel=WHEEL, soil=soil)
+    assert dp[0] < 0  # rolling resistance at s = 0
+    k = int(np.argmax(dp > 0))
+    assert k > 0 and np.all(dp[:k] <= 0) and np.all(dp[k:] > 0)
+    assert 0.0 < s[k] < 0.2  # ~0.08 for these presets
+    curve = slip_vs_drawbar_curve(W=W_WHEEL, wheel=WHEEL, soil=soil)
+    np.testing.assert_allclose(
+        curve.drawbar_pull, drawbar_pull(curve.slip, W=W_WHEEL, wheel=WHEEL, soil=soil)
+    )
+    np.testing.assert_allclose(curve.drawbar_pull, curve.thrust - curve.resistance)
+
+
+# ------------------------------------------------------------------- normal force law
+def test_normal_force_continuous_at_contact_onset():
+    kw = {"wheel": WHEEL, "soil": LUNAR_REGOLITH}
+    # W(0) = 0 for any approach speed; damping vanishes at z = 0.
+    for zd in (-1.0, 0.0, 0.5, 10.0):
+        assert normal_force(0.0, zd, **kw) == 0.0
+        assert normal_force(-1e-3, zd, **kw) == 0.0
+    assert contact_damping(0.0, **kw) == 0.0
+    # W(1e-9) = 77970.3 * (1e-9)^1.5 = 2.47e-9 N: tiny.
+    n_tiny = float(normal_force(1e-9, 0.0, **kw))
+    assert 0.0 < n_tiny < 1e-8
+    assert n_tiny == pytest.approx(77970.3077 * 1e-9**1.5, rel=1e-6)
+    # Approaching contact the force goes continuously to 0 even when hitting fast.
+    zs = np.geomspace(1e-12, 1e-3, 50)
+    forces = normal_force(zs, 2.0, **kw)
+    assert np.all(np.diff(forces) > 0) and forces[0] < 1e-6
+    # Never pulls: fast rebound clips to 0, never negative.
+    z = np.linspace(-0.01, 0.05, 61)
+    for zd in (-100.0, -1.0, 0.0, 1.0):
+        assert np.all(normal_force(z, zd, **kw) >= 0.0)
+    assert normal_force(0.01, -100.0, **kw) == 0.0
+
+
+def test_contact_stiffness_and_damping_ratio():
+    kw = {"wheel": WHEEL, "soil": LUNAR_REGOLITH}
+    z = np.array([0.002, 0.01, 0.04])
+    h = 1e-7
+    numeric = (bekker_load(z + h, **kw) - bekker_load(z - h, **kw)) / (2 * h)
+    np.testing.assert_allclose(contact_stiffness(z, **kw), numeric, rtol=1e-6)
+    assert contact_stiffness(-0.01, **kw) == 0.0
+    # d(z) = 2 zeta sqrt(k(z) m) with m = W(z)/g: the damping ratio is zeta at every z.
+    m = bekker_load(z, **kw) / LUNAR_GRAVITY_MPS2
+    zeta = contact_damping(z, **kw) / (2.0 * np.sqrt(contact_stiffness(z, **kw) * m))
+    np.testing.assert_allclose(zeta, LUNAR_REGOLITH.damping_ratio, rtol=1e-12)
+    # The damping term is linear in z_dot: N(z, zd) = W(z) + d(z) zd (when positive).
+    np.testing.assert_allclose(
+        normal_force(z, 0.01, **kw),
+        bekker_load(z, **kw) + contact_damping(z, **kw) * 0.01,
+        rtol=1e-12,
+    )
+
+
+# ------------------------------------------------------------------------- lateral force
+@pytest.mark.parametrize("soil", PRESETS, ids=lambda s: s.name)
+def test_lateral_force_odd_in_slip_angle_and_zero_at_zero(soil):
+    beta = np.radians([0.5, 2.0, 5.0, 15.0, 40.0, 80.0])
+    z = static_sinkage(W_WHEEL, wheel=WHEEL, soil=soil)
+    for s in (0.0, 0.2, 0.6):
+        pos = wheel_forces(slip=s, slip_angle=beta, W=W_WHEEL, z=z, wheel=WHEEL, soil=soil)
+        neg = wheel_forces(slip=s, slip_angle=-beta, W=W_WHEEL, z=z, wheel=WHEEL, soil=soil)
+        np.testing.assert_array_equal(pos.lateral, -neg.lateral)
+        assert np.all(pos.lateral < 0)  # sliding left -> pushed right
+        assert np.all(np.diff(pos.lateral) < 0)  # grows with |beta|
+        zero = wheel_forces(slip=s, slip_angle=0.0, W=W_WHEEL, z=z, wheel=WHEEL, soil=soil)
+        assert float(zero.lateral) == 0.0
+        tiny = wheel_forces(slip=s, slip_angle=1e-9, W=W_WHEEL, z=z, wheel=WHEEL, soil=soil)
+        assert -1e-5 < float(tiny.lateral) < 0.0  # continuous through 0
+        # The lateral force does not change the longitudinal ones.
+        np.testing.assert_allclose(pos.thrust, float(zero.thrust), rtol=1e-13)
+
+
+# ---------------------------------------------------------------------- reference slip
+def test_reference_slip_increases_with_slope_and_balances():
+    loads = [W_WHEEL] * 4
+    slopes = np.radians(np.arange(0.0, 21.0, 2.0))
+    slips = np.array(
+        [
+            reference_slip(slope_rad=a, wheel_loads_N=loads, wheel=WHEEL, soil=LUNAR_REGOLITH)
+            for a in slopes
+        ]
+    )
+    # Measured: 0.080 (0 deg), 0.111, 0.144, 0.180, 0.221, 0.267 (10 deg), 0.320, 0.381,
+    # 0.456, 0.547, 0.668 (20 deg).
+    assert np.all(np.diff(slips) > 0)
+    assert 0.03 < slips[0] < 0.15 and 0.4 < slips[-1] < 0.9
+    np.testing.assert_allclose(slips[[0, 5, 10]], [0.08038825, 0.26701262, 0.66764028], rtol=1e-5)
+    # At the root the drawbar pull balances the downslope weight.
+    a = slopes[7]
+    normal = np.asarray(loads) * math.cos(a)
+    dp = drawbar_pull(slips[7], W=normal, wheel=WHEEL, soil=LUNAR_REGOLITH)
+    assert float(np.sum(dp)) == pytest.approx(4 * W_WHEEL * math.sin(a), rel=1e-8)
+    # The curve helper agrees and marks the impossible slope with NaN.
+    curve = slip_vs_slope_curve(
+        slopes_rad=np.radians([0.0, 10.0, 45.0]),
+        wheel_loads_N=loads,
+        wheel=WHEEL,
+        soil=LUNAR_REGOLITH,
+    )
+    np.testing.assert_allclose(curve[:2], slips[[0, 5]])
+    assert math.isnan(curve[2])
+
+
+def test_reference_slip_immobilized_on_impossible_slope():
+    with pytest.raises(ImmobilizedError, match="cannot climb") as info:
+        reference_slip(
+            slope_rad=math.radians(45.0),
+            wheel_loads_N=[W_WHEEL] * 4,
+            wheel=WHEEL,
+            soil=LUNAR_REGOLITH,
+        )
+    assert isinstance(info.value, LunarDrakeError) and isinstance(info.value, RuntimeError)
+
+
+def test_reference_slip_downhill_brakes_and_slope_normal_flag():
+    loads = [W_WHEEL] * 4
+    s = reference_slip(
+        slope_rad=math.radians(-15.0), wheel_loads_N=loads, wheel=WHEEL, soil=LUNAR_REGOLITH
+    )
+    assert -0.99 < s < 0.0
+    dp = drawbar_pull(s, W=W_WHEEL * math.cos(math.radians(15.0)), wheel=WHEEL, soil=LUNAR_REGOLITH)
+    assert 4 * float(dp) == pytest.approx(-4 * W_WHEEL * math.sin(math.radians(15.0)), rel=1e-8)
+    # Without the cos(slope) normal-load reduction the wheels sink deeper (more
+    # resistance) but also carry more load (more thrust): the result must differ.
+    a = math.radians(15.0)
+    with_cos = reference_slip(slope_rad=a, wheel_loads_N=loads, wheel=WHEEL, soil=LUNAR_REGOLITH)
+    without = reference_slip(
+        slope_rad=a, wheel_loads_N=loads, wheel=WHEEL, soil=LUNAR_REGOLITH, slope_normal=False
+    )
+    assert without != pytest.approx(with_cos, rel=1e-3)
+    with pytest.raises(OutOfRangeError, match="wheel_loads_N"):
+        reference_slip(slope_rad=0.1, wheel_loads_N=[81.0, -1.0], wheel=WHEEL, soil=GRC1)
+    with pytest.raises(OutOfRangeError, match="slope_rad"):
+        reference_slip(slope_rad=2.0, wheel_loads_N=loads, wheel=WHEEL, soil=GRC1)
+
+
+# ------------------------------------------------------------------- vectorization
+def test_vectorized_call_equals_scalar_calls():
+    slip = np.array([0.0, 0.12, 0.5, -0.3])
+    beta = np.array([0.0, 0.05, -0.2, 0.3])
+    W = np.array([81.0, 60.0, 110.0, 75.0])
+    z = np.array([0.0103, 0.008, 0.0, 0.012])  # wheel 2 out of contact
+    direction = np.array([1.0, 0.4, -1.0, -0.2])
+    for soil in PRESETS:
+        for d in (None, direction):
+            vec = wheel_forces(
+                slip=slip, slip_angle=beta, W=W, z=z, wheel=WHEEL, soil=soil, direction=d
+            )
+            for i in range(4):
+                one = wheel_forces(
+                    slip=slip[i],
+                    slip_angle=beta[i],
+                    W=W[i],
+                    z=z[i],
+                    wheel=WHEEL,
+                    soil=soil,
+                    direction=None if d is None else d[i],
+                )
+                for name in ("thrust", "resistance", "drawbar_pull", "lateral", "torque"):
+                    assert np.shape(getattr(one, name)) == ()
+                    assert getattr(vec, name)[i] == pytest.approx(
+                        float(getattr(one, name)), rel=1e-13, abs=1e-13
+                    )
+            # Out of contact: exactly zero.
+            for name in ("thrust", "resistance", "drawbar_pull", "lateral", "torque"):
+                assert getattr(vec, name)[2] == 0.0
+    # Broadcasting a (3, 1) slip against 4 wheels gives (3, 4).
+    f = wheel_forces(
+        slip=np.array([[0.1], [0.2], [0.3]]),
+        slip_angle=0.0,
+        W=W,
+        z=z,
+        wheel=WHEEL,
+        soil=LUNAR_REGOLITH,
+    )
+    assert f.thrust.shape == (3, 4)
+
+
+# -------------------------------------------------------------- direction and kinematics
+def test_travel_direction_blend_rest_mirror_and_continuity():
+    kw = {"W": W_WHEEL, "z": 0.0103, "wheel": WHEEL, "soil": LUNAR_REGOLITH}
+    # At rest (s = 0, beta = 0, direction 0): no force at all.
+    rest = wheel_forces(slip=0.0, slip_angle=0.0, direction=0.0, **kw)
+    for name in ("thrust", "resistance", "drawbar_pull", "lateral", "torque"):
+        assert float(getattr(rest, name)) == 0.0
+    # direction = 1 is the plain forward model.
+    a = wheel_forces(slip=0.3, slip_angle=0.1, direction=1.0, **kw)
+    b = wheel_forces(slip=0.3, slip_angle=0.1, **kw)
+    assert float(a.drawbar_pull) == pytest.approx(float(b.drawbar_pull), rel=1e-14)
+    # direction = -1 is the mirror image: reversing at slip s (s < 0 when driving
+    # backward) gives minus the forward forces at -s, same lateral force.
+    rev = wheel_forces(slip=-0.3, slip_angle=0.1, direction=-1.0, **kw)
+    assert float(rev.thrust) == pytest.approx(-float(b.thrust), rel=1e-14)
+    assert float(rev.torque) == pytest.approx(-float(b.torque), rel=1e-14)
+    assert float(rev.resistance) == pytest.approx(-float(b.resistance), rel=1e-14)
+    assert float(rev.lateral) == pytest.approx(float(b.lateral), rel=1e-14)
+    # Continuous through v = 0 for a spinning wheel (s = 1 on both sides): the jump
+    # between v = -delta and v = +delta shrinks in proportion to delta (Lipschitz, with
+    # a slope set by v_eps = 1e-3 m/s: at most ~(|DP fwd| + |DP bwd|) / v_eps).
+    jumps = []
+    for delta in (1e-4, 1e-6, 1e-8):
+        v = np.array([-delta, delta])
+        s = slip_ratio(omega_r=0.05, v=v)
+        f = wheel_forces(slip=s, slip_angle=0.0, direction=travel_direction(v), **kw)
+        assert np.all(f.thrust > 0)  # the spinning wheel pushes forward either way
+        jumps.append(abs(f.drawbar_pull[1] - f.drawbar_pull[0]))
+    assert jumps[0] < 200.0 * 2e-4 / 1e-3
+    assert jumps[1] == pytest.approx(jumps[0] * 1e-2, rel=1e-3)
+    assert jumps[2] == pytest.approx(jumps[0] * 1e-4, rel=1e-3)
+
+
+def test_slip_ratio_and_slip_angle_conventions():
+    # Driving: r w = 1, v = 0.8 -> (1 - 0.8)/1 = 0.2; braking: r w = 0.8, v = 1 -> -0.2.
+    assert slip_ratio(omega_r=1.0, v=0.8) == pytest.approx(0.2)
+    assert slip_ratio(omega_r=0.8, v=1.0) == pytest.approx(-0.2)
+    assert slip_ratio(omega_r=1.0, v=0.0) == 1.0  # pure spin
+    assert slip_ratio(omega_r=0.0, v=1.0) == -1.0  # locked wheel
+    assert slip_ratio(omega_r=0.0, v=0.0) == 0.0
+    # Continuous at rest: 1e-6 m/s of rim speed with v_eps = 1e-3 -> 1e-3.
+    assert slip_ratio(omega_r=1e-6, v=0.0, v_eps=1e-3) == pytest.approx(1e-3)
+    assert slip_ratio(omega_r=1.0, v=-1.0) == 1.0  # clipped
+    assert slip_angle(v_x=1.0, v_y=1.0) == pytest.approx(math.pi / 4)
+    assert slip_angle(v_x=-1.0, v_y=1.0) == pytest.approx(math.pi / 4)
+    assert slip_angle(v_x=0.0, v_y=1e-6, v_eps=1e-3) == pytest.approx(1e-3, rel=1e-6)
+    np.testing.assert_array_equal(
+        travel_direction(np.array([-1.0, -5e-4, 0.0, 2.0])), [-1.0, -0.5, 0.0, 1.0]
+    )
+
+
+# ------------------------------------------------------------------------ validation
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("k_phi", -1.0),
+        ("k_phi", 0.0),
+        ("phi", math.pi / 2),
+        ("phi", math.radians(95.0)),
+        ("K", 0.0),
+        ("K", -0.01),
+        ("n", 0.0),
+        ("n", -1.0),
+        ("n", 3.0),
+        ("c", -1.0),
+        ("k_c", -5.0),
+        ("K_y", 0.0),
+        ("density", 0.0),
+        ("rear_angle_ratio", 1.0),
+        ("damping_ratio", -0.1),
+        ("c1", 1.5),
+        ("phi", math.nan),
+    ],
+)
+def test_soil_out_of_range_raises_naming_field_and_value(field, value):
+    with pytest.raises(OutOfRangeError) as info:
+        SoilParams(**{field: value})
+    msg = str(info.value)
+    assert msg.startswith(f"{field} = ")
+    assert repr(value) in msg
+
+
+def test_soil_combined_and_type_errors():
+    with pytest.raises(OutOfRangeError, match="c1 \\+ c2"):
+        SoilParams(c1=0.7, c2=0.5)
+    with pytest.raises(ConfigError, match="must be a real number"):
+        SoilParams(n="1")
+    with pytest.raises(ConfigError, match="must be a real number"):
+        SoilParams(K=True)
+    with pytest.raises(ConfigError, match="name"):
+        SoilParams(name="")
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("radius_m", 0.0),
+        ("radius_m", -0.2),
+        ("radius_m", 10.0),
+        ("width_m", 0.0),
+        ("width_m", -0.1),
+        ("width_m", 5.0),
+        ("width_m", math.inf),
+    ],
+)
+def test_wheel_out_of_range_raises(field, value):
+    with pytest.raises(OutOfRangeError) as info:
+        WheelParams(**{field: value})
+    assert str(info.value).startswith(f"{field} = {value!r}")
+
+
+def test_presets():
+    assert soil_preset("lunar_regolith") is LUNAR_REGOLITH
+    assert soil_preset("GRC-1") is GRC1 and soil_preset("grc1") is GRC1
+    with pytest.raises(ConfigError, match=r"'mars'.*\['grc1', 'lunar_regolith'\]"):
+        soil_preset("mars")
+    # Wong's lunar soil values.
+    assert (LUNAR_REGOLITH.n, LUNAR_REGOLITH.k_c, LUNAR_REGOLITH.k_phi) == (1.0, 1400.0, 820000.0)
+    assert LUNAR_REGOLITH.c == 170.0 and LUNAR_REGOLITH.K == 0.018
+    assert math.degrees(LUNAR_REGOLITH.phi) == pytest.approx(35.0)
+    assert 1600.0 <= GRC1.density <= 1890.0  # within GRC-1's min/max densities
+    assert tm.SOIL_PRESETS["grc1"] is GRC1

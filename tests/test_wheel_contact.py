@@ -1,0 +1,307 @@
+"""Wheel-regolith contact: footprint geometry, the contact LeafSystem, a rover at rest and
+driving, spawn errors, the off-terrain stop, and a small slip study."""
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.math import SpatialVelocity
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from lunar_drake.diagrams.rover import add_rover_model, spawn_pose, wire_rover
+from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.dynamics.contact_geometry import FootprintSampling, wheel_contact_geometry
+from lunar_drake.errors import ConfigError, NoDataError, OutOfBoundsError, OutOfRangeError
+from lunar_drake.models.rover_description import rover_preset
+from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
+from lunar_drake.systems.rover_kinematics import TwistSchedule
+from lunar_drake.systems.terrain_source import TerrainSource
+from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS, WheelRegolithContact
+from lunar_drake.terrain.heightfield import Heightfield
+
+R, B = 0.25, 0.2
+WHEEL = tm.WheelParams(radius_m=R, width_m=B)
+SOIL = tm.LUNAR_REGOLITH
+
+
+def _plane(n=200, res=0.05, gx=0.0, gy=0.0, bump=None):
+    yy, xx = np.mgrid[0:n, 0:n]
+    x = (xx + 0.5 - n / 2) * res
+    y = (n / 2 - yy - 0.5) * res
+    z = gx * x + gy * y
+    if bump is not None:
+        bx, by, h, rad = bump
+        z = z + np.where((x - bx) ** 2 + (y - by) ** 2 <= rad**2, h, 0.0)
+    return Heightfield.from_array(z.astype(np.float32), resolution_m=res)
+
+
+def _geom(hf, centre, axle=(0.0, 1.0, 0.0)):
+    return wheel_contact_geometry(
+        heightfield=hf,
+        p_WWo=np.array([centre]),
+        axle_W=np.array([axle]),
+        radius_m=R,
+        width_m=B,
+        sampling=FootprintSampling(),
+    )
+
+
+def test_footprint_geometry_flat_slope_and_rock():
+    flat = _plane()
+    g = _geom(flat, (0.0, 0.0, R - 0.02))
+    assert g.sinkage[0] == pytest.approx(0.02, abs=1e-6)
+    np.testing.assert_allclose(g.n_W[0], [0, 0, 1], atol=1e-9)
+    np.testing.assert_allclose(g.forward_W[0], [1, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(g.p_WC[0], [0, 0, -0.02], atol=1e-6)  # rim bottom, in the soil
+    # Above the ground: negative sinkage (no contact).
+    assert _geom(flat, (0.0, 0.0, R + 0.05)).sinkage[0] == pytest.approx(-0.05, abs=1e-6)
+    # A 20 % slope along x: the normal tilts back by atan(0.2).
+    g = _geom(_plane(gx=0.2), (0.0, 0.0, R))
+    np.testing.assert_allclose(g.n_W[0], np.array([-0.2, 0, 1]) / math.hypot(0.2, 1), atol=1e-6)
+    # A 5 cm rock under the front of the tread raises the sinkage by about its height.
+    g0 = _geom(flat, (0.0, 0.0, R))
+    g1 = _geom(_plane(bump=(0.05, 0.0, 0.05, 0.06)), (0.0, 0.0, R))
+    assert g1.sinkage[0] - g0.sinkage[0] > 0.035
+    # Off the raster: flagged, never an exception.
+    assert _geom(flat, (4.99, 0.0, R)).off_terrain[0]
+
+
+def _contact_forces(hf, *, p, v, w_spin):
+    """Evaluates WheelRegolithContact for one wheel (body 1) whose parent is body 0."""
+    sys = WheelRegolithContact(wheel_bodies=[1], wheel_parents=[0], wheel=WHEEL, soil=SOIL)
+    ctx = sys.CreateDefaultContext()
+    sys.body_poses_input.FixValue(ctx, [RigidTransform(), RigidTransform(p)])
+    sys.body_spatial_velocities_input.FixValue(
+        ctx,
+        [
+            SpatialVelocity(np.zeros(3), np.zeros(3)),
+            SpatialVelocity(np.array([0.0, w_spin, 0.0]), np.asarray(v, float)),
+        ],
+    )
+    sys.heightfield_input.FixValue(ctx, hf)
+    forces = sys.spatial_forces_output.Eval(ctx)
+    state = sys.wheel_state_output.Eval(ctx)
+    return forces[0].F_Bq_W, dict(zip(WHEEL_STATE_FIELDS, state, strict=True))
+
+
+def test_zero_slip_on_flat_ground_gives_no_traction():
+    hf = _plane()
+    v = 0.1
+    F, st = _contact_forces(hf, p=[0, 0, R - 0.012], v=[v, 0, 0], w_spin=v / R)
+    assert st["slip"] == pytest.approx(0.0, abs=1e-12)
+    assert st["normal_force_N"] > 50
+    # Only rolling (compaction) resistance acts along x: -R_c.
+    rc = float(tm.compaction_resistance(st["sinkage_m"], wheel=WHEEL, soil=SOIL))
+    assert F.translational()[0] == pytest.approx(-rc, rel=1e-6)
+    assert F.translational()[1] == pytest.approx(0.0, abs=1e-9)
+    # Driving (wheel faster than the hub): forward traction.
+    F2, st2 = _contact_forces(hf, p=[0, 0, R - 0.012], v=[v, 0, 0], w_spin=1.3 * v / R)
+    assert st2["slip"] > 0.2 and F2.translational()[0] > 0.1 * st2["normal_force_N"]
+    # Sliding sideways to the left: the side force pushes right.
+    F3, _ = _contact_forces(hf, p=[0, 0, R - 0.012], v=[v, 0.05, 0], w_spin=v / R)
+    assert F3.translational()[1] < -1.0
+
+
+def test_normal_force_is_continuous_at_contact_onset():
+    hf = _plane()
+    heights = R + np.array([1e-3, 1e-6, 0.0, -1e-6, -1e-4, -1e-3])
+    n = [
+        _contact_forces(hf, p=[0, 0, z], v=[0, 0, 0], w_spin=0)[1]["normal_force_N"]
+        for z in heights
+    ]
+    assert n[0] == 0.0 and n[1] == 0.0
+    assert n[3] < 0.05 and n[4] < n[5]
+    assert all(b >= a for a, b in itertools.pairwise(n))
+    # The wheel's soil moment about the axle equals the Wong-Reece torque; at rest it is 0.
+    F, _ = _contact_forces(hf, p=[0, 0, R - 0.01], v=[0, 0, 0], w_spin=0)
+    assert abs(F.rotational()[1]) < 1e-9
+
+
+def _rover_sim(*, preset="krex2_rp", hf=None, twist=(0.0, 0.0, 0.0), dt=0.01, x0=-2.0):
+    hf = hf or _plane(n=240, res=0.05)
+    b = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(
+        MultibodyPlantConfig(time_step=dt, discrete_contact_approximation="sap"), b
+    )
+    plant.mutable_gravity_field().set_gravity_vector([0, 0, -LUNAR_GRAVITY_MPS2])
+    rover = add_rover_model(plant, description=rover_preset(preset))
+    plant.Finalize()
+    terrain = b.AddSystem(TerrainSource(heightfield=hf))
+    h = wire_rover(
+        b, plant=plant, rover=rover, heightfield_port=terrain.heightfield_output, soil=SOIL, seed=3
+    )
+    sched = b.AddSystem(TwistSchedule(segments=[(1.0, 0, 0, 0), (100.0, *twist)]))
+    b.Connect(sched.twist_output, h.kinematics.twist_input)
+    g = b.AddSystem(ConstantVectorSource(np.zeros(2)))
+    b.Connect(g.get_output_port(), h.kinematics.gimbal_input)
+    logs = {
+        "pose": LogVectorOutput(h.truth.pose_output, b, 0.05),
+        "wheels": LogVectorOutput(h.contact.wheel_state_output, b, 0.05),
+        "enc": LogVectorOutput(h.encoders.GetOutputPort("angles"), b, 0.05),
+    }
+    d = b.Build()
+    sim = Simulator(d)
+    ctx = sim.get_mutable_context()
+    X = spawn_pose(heightfield=hf, rover=rover, x_m=x0, y_m=0.0, yaw_rad=0.0, soil=SOIL)
+    plant.SetFloatingBaseBodyPoseInWorldFrame(
+        plant.GetMyMutableContextFromRoot(ctx), rover.chassis, X
+    )
+    sim.Initialize()
+    return sim, ctx, logs, rover, h
+
+
+def test_rover_rests_in_static_equilibrium():
+    sim, ctx, logs, rover, _ = _rover_sim()
+    sim.AdvanceTo(3.0)
+    pose = logs["pose"].FindLog(ctx).data()
+    ws = logs["wheels"].FindLog(ctx).data()
+    nf = len(WHEEL_STATE_FIELDS)
+    total_n = ws[1::nf, -1].sum()
+    assert total_n == pytest.approx(rover.total_mass_kg * LUNAR_GRAVITY_MPS2, rel=0.01)
+    # At rest: no drift, level, wheels at their static sinkage.
+    assert np.abs(pose[6:9, -1]).max() < 1e-3
+    assert np.abs(pose[0, -1] - pose[0, 0]) < 5e-3
+    z_static = tm.static_sinkage(np.asarray(rover.static_wheel_load_N), wheel=WHEEL, soil=SOIL)
+    np.testing.assert_allclose(ws[0::nf, -1], z_static, rtol=0.05)
+
+
+@pytest.mark.parametrize("preset", ["krex2_rp", "husky_rp"])
+def test_rover_drives_straight_with_reference_slip_on_flat_ground(preset):
+    sim, ctx, logs, rover, h = _rover_sim(preset=preset, twist=(0.15, 0.0, 0.0))
+    sim.AdvanceTo(12.0)
+    t = logs["pose"].FindLog(ctx).sample_times()
+    pose = logs["pose"].FindLog(ctx).data()
+    enc = logs["enc"].FindLog(ctx).data()
+    i0, i1 = np.searchsorted(t, 4.0), len(t) - 1
+    gt = np.linalg.norm(pose[:3, i1] - pose[:3, i0])
+    dr = np.mean(enc[:, i1] - enc[:, i0]) * rover.description.wheel_radius_m
+    slip = 1 - gt / dr
+    ref = tm.reference_slip(
+        slope_rad=0.0, wheel_loads_N=rover.static_wheel_load_N, wheel=h.wheel, soil=SOIL
+    )
+    assert slip == pytest.approx(ref, abs=0.01)
+    assert abs(pose[1, i1]) < 0.02 and abs(pose[5, i1]) < math.radians(1.0)
+
+
+def test_point_turn_and_crab_on_explicit_rover():
+    sim, ctx, logs, *_ = _rover_sim(twist=(0.0, 0.0, 0.1))
+    sim.AdvanceTo(8.0)
+    pose = logs["pose"].FindLog(ctx).data()
+    assert pose[5, -1] > 0.3  # turned left in place
+    assert np.hypot(pose[0, -1] - pose[0, 0], pose[1, -1] - pose[1, 0]) < 0.1
+    sim, ctx, logs, *_ = _rover_sim(twist=(0.0, 0.1, 0.0))
+    sim.AdvanceTo(8.0)
+    pose = logs["pose"].FindLog(ctx).data()
+    assert pose[1, -1] - pose[1, 0] > 0.3  # crabbed left
+    # Some yaw while the wheels swing to 90 deg (they drive as they steer).
+    assert abs(pose[5, -1]) < math.radians(5)
+
+
+def test_spawn_errors_are_clear():
+    hf = _plane(n=100)
+    from lunar_drake.models.rover_sdf import add_rover
+
+    plant = __import__("pydrake.multibody.plant", fromlist=["MultibodyPlant"]).MultibodyPlant(0.01)
+    rover = add_rover(plant, description=rover_preset("krex2_rp"))
+    plant.Finalize()
+    with pytest.raises(OutOfBoundsError, match="rover spawn at"):
+        spawn_pose(heightfield=hf, rover=rover, x_m=10.0, y_m=0.0, yaw_rad=0.0, soil=SOIL)
+    z = np.zeros((100, 100), np.float32)
+    z[10:90, 10:90] = np.nan
+    holes = Heightfield.from_array(z, resolution_m=0.05)
+    with pytest.raises(NoDataError, match="nodata"):
+        spawn_pose(heightfield=holes, rover=rover, x_m=0.0, y_m=0.0, yaw_rad=0.0, soil=SOIL)
+    assert RotationMatrix  # imported for readers of the spawn frame conventions
+
+
+def test_bad_rover_and_soil_values_are_rejected():
+    from lunar_drake.scenario import load_scenario
+
+    with pytest.raises(ConfigError, match=r"rover\.soil = 'sand'"):
+        load_scenario(scenario_name="small", scenario_text="{rover: {soil: sand}}")
+    with pytest.raises(ConfigError, match="steering"):
+        load_scenario(
+            scenario_name="small", scenario_text="{rover: {description: {steering: tracked}}}"
+        )
+    with pytest.raises(OutOfRangeError, match="wheel_radius_m"):
+        load_scenario(
+            scenario_name="small", scenario_text="{rover: {description: {wheel_radius_m: -1}}}"
+        )
+    with pytest.raises(OutOfRangeError):
+        tm.SoilParams(k_phi=-5.0)
+    from lunar_drake.studies.slip_study import SlipCase
+
+    with pytest.raises(ConfigError, match="'tank'"):
+        SlipCase(rover="tank", slope_deg=0.0, seed=0)
+
+
+def test_skid_scenario_matches_the_husky_preset():
+    import dataclasses as dc
+
+    from lunar_drake.scenario import load_scenario
+
+    assert dc.asdict(load_scenario(scenario_name="skid").rover.description) == dc.asdict(
+        rover_preset("husky_rp")
+    )
+
+
+def test_driving_off_the_raster_ends_the_run_cleanly(tmp_path, monkeypatch):
+    from lunar_drake.mission import run_mission
+    from lunar_drake.scenario import load_scenario
+
+    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    s = load_scenario(
+        scenario_name="small",
+        scenario_text=(
+            "{rover: {spawn_x_m: 9.0, route: [{duration_s: 1.0}, {duration_s: 60, vx_mps: 0.5}]}}"
+        ),
+    )
+    result = run_mission(
+        scenario=s, scenario_name="small", out_dir=tmp_path / "run", duration=40.0, progress=False
+    )
+    assert "left the terrain" in result.summary["stop_reason"]
+    assert result.summary["simulated_s"] < 40.0
+    assert (tmp_path / "run" / "truth.csv").exists()
+
+
+def test_slip_study_matches_reference_and_is_deterministic(tmp_path):
+    from lunar_drake.studies.slip_study import run_slip_study
+
+    rows = run_slip_study(
+        rovers=["explicit"],
+        slopes_deg=[0.0, 12.0],
+        distance_m=1.0,
+        seeds=2,
+        out_dir=tmp_path,
+        progress=False,
+    )
+    for r in rows:
+        assert abs(r["slip"] - r["reference_slip"]) < 0.03
+    slips = {s: [r["slip"] for r in rows if r["slope_deg"] == s] for s in (0.0, 12.0)}
+    assert slips[12.0][0] > slips[0.0][0] + 0.1  # slip rises with slope
+    assert max(slips[12.0]) - min(slips[12.0]) <= 0.01  # spread across seeds <= 1 pp
+    header = (tmp_path / "slip.csv").read_text().splitlines()[0].split(",")
+    assert {"rover", "slope_deg", "seed", "slip", "reference_slip", "sinkage_m", "energy_J"} <= set(
+        header
+    )
+    assert (tmp_path / "slip.png").stat().st_size > 1000
+    import json
+
+    params = json.loads((tmp_path / "params.json").read_text())
+    assert params["rovers"]["explicit"]["wheel_radius_m"] == 0.25
+    assert len(params["slope_loads"]) == 4
+    first = (tmp_path / "slip.csv").read_bytes()
+    run_slip_study(
+        rovers=["explicit"],
+        slopes_deg=[0.0, 12.0],
+        distance_m=1.0,
+        seeds=2,
+        out_dir=tmp_path / "again",
+        progress=False,
+    )
+    assert (tmp_path / "again" / "slip.csv").read_bytes() == first
