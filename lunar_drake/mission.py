@@ -32,11 +32,22 @@ def _write_text(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def load_site_layers(site: Site, *, max_albedo_px: int = 1024):
-    """Opens the site's Heightfield and a reduced albedo grid (or None)."""
+def load_site_layers(site: Site, *, max_albedo_px: int = 1024, in_memory_max_px: int = 4096 * 4096):
+    """Opens the site's Heightfield and a reduced albedo grid (or None).
+
+    Rasters up to ``in_memory_max_px`` pixels are loaded into memory; larger ones stay
+    file-backed (windowed reads through the Heightfield's block cache).
+    """
     from lunar_drake.terrain.heightfield import Heightfield
 
     hf = Heightfield.open(site.dem)
+    rows, cols = hf.shape
+    if rows * cols <= in_memory_max_px:
+        # Small sites are read whole: per-step contact queries then skip the block cache.
+        z = hf.read_window(0, 0, rows, cols)
+        hf = Heightfield.from_array(
+            z, resolution_m=hf.resolution_m, crs=hf.crs, origin_xy=hf.origin_xy
+        )
     albedo = None
     if site.albedo is not None:
         albedo = Heightfield.open(site.albedo).decimated(max_size=max_albedo_px)[0]

@@ -1,0 +1,75 @@
+"""Benchmark: real-time factor of the default mission without cameras.
+
+    .venv/bin/python benchmarks/sim_rate.py --out bench_sim_rate.json
+
+Builds the default scenario's mission diagram (site from the cache; built first if
+needed, not timed), then times ``--repeats`` runs of ``--sim-s`` simulated seconds of
+the rover driving its route, each from a fresh context. Prints a table; writes JSON.
+Goal (issue 3): >= 5x real time on this 2-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scenario", default="default")
+    p.add_argument("--sim-s", type=float, default=30.0)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+
+    from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+
+    from lunar_drake.diagrams.mission import MakeMissionDiagram
+    from lunar_drake.mission import load_site_layers
+    from lunar_drake.scenario import load_scenario
+    from lunar_drake.site import ensure_site
+
+    scenario = load_scenario(scenario_name=args.scenario)
+    site = ensure_site(scenario, progress=False)
+    hf, _ = load_site_layers(site)
+    diagram = MakeMissionDiagram(scenario=scenario, heightfield=hf)
+    runs = []
+    for _ in range(args.repeats):
+        sim = Simulator(diagram)
+        ApplySimulatorConfig(scenario.simulator_config, sim)
+        sim.Initialize()
+        t0 = time.perf_counter()
+        sim.AdvanceTo(args.sim_s)
+        wall = time.perf_counter() - t0
+        ctx = diagram.GetMyContextFromRoot(sim.get_context())
+        pose = diagram.GetOutputPort("rover.pose").Eval(ctx)
+        runs.append({"wall_s": wall, "rtf": args.sim_s / wall,
+                     "final_xy_m": [float(pose[0]), float(pose[1])]})
+    med = statistics.median(r["rtf"] for r in runs)
+    result = {
+        "benchmark": "sim_rate",
+        "scenario": args.scenario,
+        "sim_s": args.sim_s,
+        "plant_time_step_s": scenario.plant_config.time_step,
+        "cpu_count": os.cpu_count(),
+        "runs": runs,
+        "median_rtf": med,
+        "goal_rtf": 5.0,
+    }
+    print(f"{'run':>4} {'wall (s)':>9} {'real-time factor':>17}")
+    for k, r in enumerate(runs):
+        print(f"{k:>4} {r['wall_s']:>9.2f} {r['rtf']:>16.2f}x")
+    print(f"median real-time factor: {med:.2f}x (goal >= 5x; {args.sim_s:g} s simulated, "
+          f"plant step {scenario.plant_config.time_step * 1e3:g} ms)")
+    if args.out:
+        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
