@@ -60,12 +60,21 @@ def _cmd_run(args) -> int:
     )
     print(
         f"Simulated {result.summary['simulated_s']:.2f} s in {t['simulate_s']:.2f} s "
-        f"(diagram built in {t['build_s']:.2f} s)"
+        f"({t['realtime_factor']:.1f}x real time; diagram built in {t['build_s']:.2f} s); "
+        f"stop: {result.summary['stop_reason']}"
     )
-    print(
-        f"Outputs: {result.out_dir.resolve()} (scenario.yaml, summary.json, timing.json"
-        + (", meshcat.html)" if meshcat else ")")
-    )
+    if "rover" in result.summary:
+        rv = result.summary["rover"]
+        print(
+            f"Rover: drove {rv['distance_m']:.1f} m, "
+            f"mean slip {100 * rv['mean_slip_moving']:.1f}%, "
+            f"max sinkage {100 * rv['max_sinkage_m']:.1f} cm, "
+            f"max tilt {rv['max_tilt_deg']:.1f} deg, drive energy {rv['energy_J']:.0f} J"
+        )
+    files = ["scenario.yaml", "summary.json", "timing.json"]
+    files += result.summary.get("rover", {}).get("logs", [])
+    files += ["meshcat.html"] if meshcat is not None else []
+    print(f"Outputs: {result.out_dir.resolve()} ({', '.join(files)})")
     if meshcat is not None:
         print(f"Meshcat: {result.meshcat_url} (static replay: {result.out_dir / 'meshcat.html'})")
         if args.wait:

@@ -182,3 +182,28 @@ def test_run_mission_with_meshcat_writes_replay(cache, tmp_path):
     systems = result.summary["systems"]
     assert {"terrain", "terrain_view", "plant", "scene_graph"} <= set(systems)
     assert not any("@" in s for s in systems)  # no addresses: summary.json is reproducible
+
+
+@pytest.mark.slow
+def test_default_rover_drives_100_m_over_the_default_site(cache, tmp_path):
+    """The issue's traverse check: the default mission (about 100 m over the synthesized
+    site, craters and rocks included) with no blow-up, tipping or sinking."""
+    from lunar_drake.mission import load_site_layers, run_mission
+    from lunar_drake.site import ensure_site
+
+    scenario = load_scenario(scenario_name="default")
+    result = run_mission(scenario=scenario, scenario_name="default", out_dir=tmp_path,
+                         progress=False)
+    rv = result.summary["rover"]
+    assert result.summary["stop_reason"] == "duration reached"
+    assert rv["distance_m"] >= 100.0
+    assert rv["max_tilt_deg"] < 20.0
+    assert rv["max_sinkage_m"] < 0.05
+    truth = np.loadtxt(tmp_path / "truth.csv", delimiter=",", skiprows=1)
+    assert np.isfinite(truth).all()
+    hf, _ = load_site_layers(ensure_site(scenario, progress=False))
+    ground = hf.height(truth[:, 1], truth[:, 2])
+    clearance = truth[:, 3] - ground
+    # The chassis centre stays above the terrain by about its nominal height.
+    assert clearance.min() > 0.25 and clearance.max() < 0.7
+    assert np.abs(truth[:, 7:10]).max() < 1.0  # no blow-up (m/s)

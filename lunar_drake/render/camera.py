@@ -1,0 +1,272 @@
+"""The Hapke terrain camera core: ray-cast LOD terrain + rover geometry, deferred Hapke
+shading, and the sensor model (no Drake; the LeafSystem is systems/hapke_camera.py).
+
+Per frame: recentre the level-of-detail terrain on the camera when it has moved more
+than ``lod_recenter_m`` (cached tiles are reused), cast one ray per pixel (Open3D /
+Embree), shade with the Hapke (2012, Sato et al. 2014 form) bidirectional reflectance
+blended with Lunar-Lambert near grazing emission, scaled per pixel by the albedo map,
+lit by the Sun (times the baked lightmap and a soft ray-cast rover shadow), an indirect
+fill opposing the Sun, Earthshine and rover spotlights; then the sensor: exposure and
+gain, shot and read noise, 12-bit ADC into uint16.
+
+Units: the shaded image is the radiance factor I/F for a unit solar irradiance at 1 au;
+Sun and Earth irradiances are scaled by distance. Earthshine irradiance on a surface
+facing Earth is ``A_E (R_E / d)^2 k(phase)`` of the solar irradiance, with Earth's
+Bond albedo A_E = 0.3 and k the illuminated fraction (a Lambert-sphere simplification).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import functools
+import math
+
+import numpy as np
+
+from lunar_drake.errors import OutOfRangeError
+from lunar_drake.render import hapke as hapke_mod
+from lunar_drake.render import sensor as sensor_mod
+from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
+from lunar_drake.render.shading import (
+    Illumination,
+    RasterSampler,
+    ShadedImage,
+    ShadingConfig,
+    SpotLight,
+    brdf_from_reflectance,
+    render,
+)
+from lunar_drake.render.terrain_lod import TerrainLOD
+
+AU_KM = 149_597_870.7
+EARTH_RADIUS_KM = 6371.0
+EARTH_BOND_ALBEDO = 0.3
+
+
+@dc.dataclass(frozen=True)
+class CameraModel:
+    """Pinhole camera and sensor settings.
+
+    Attributes:
+        width, height: image size (px). fov_y_deg: vertical field of view (deg).
+        exposure_s, gain: default exposure time (s) and analog gain.
+        shadow_samples: rays toward the solar disk per penumbra pixel (soft rover shadow).
+        near_radius_m: full-resolution terrain radius around the camera (m).
+        tile_px: LOD tile size (px). lod_recenter_m: camera motion (m) that recentres it.
+        fill_fraction: indirect fill as a fraction of the direct sunlight (paper: ~3%).
+        fill_fraction_sun_down: fill fraction when the Sun is below the horizon (light
+            scattered from sunlit distant terrain; an assumption).
+        limb_blend_deg: emission angles (deg) over which Hapke blends into Lunar-Lambert.
+    """
+
+    width: int = 1280
+    height: int = 960
+    fov_y_deg: float = 45.0
+    exposure_s: float = 0.002
+    gain: float = 1.0
+    shadow_samples: int = 8
+    near_radius_m: float = 20.0
+    tile_px: int = 256
+    lod_recenter_m: float = 10.0
+    fill_fraction: float = 0.03
+    fill_fraction_sun_down: float = 0.003
+    limb_blend_deg: tuple[float, float] = (84.0, 89.0)
+
+    def __post_init__(self):
+        if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
+            raise OutOfRangeError(
+                f"camera size {self.width}x{self.height} px; allowed 16..8192 each"
+            )
+        if not 1.0 <= self.fov_y_deg <= 170.0:
+            raise OutOfRangeError(f"fov_y_deg = {self.fov_y_deg!r}; allowed [1, 170] deg")
+        if not self.exposure_s > 0:
+            raise OutOfRangeError(f"exposure_s = {self.exposure_s!r}; must be > 0 s")
+        if not self.gain > 0:
+            raise OutOfRangeError(f"gain = {self.gain!r}; must be > 0")
+
+    def pinhole(self) -> PinholeCamera:
+        return PinholeCamera.from_fov(
+            width=self.width, height=self.height, fov_y_rad=math.radians(self.fov_y_deg)
+        )
+
+
+def earthshine_fraction(*, earth_distance_km: float, earth_phase: float) -> float:
+    """Earthshine irradiance as a fraction of the solar irradiance (see module doc)."""
+    return EARTH_BOND_ALBEDO * (EARTH_RADIUS_KM / earth_distance_km) ** 2 * float(earth_phase)
+
+
+class TerrainCameraRenderer:
+    """Renders frames of one site for any number of cameras (they share the scene).
+
+    Args:
+        heightfield: the site terrain. albedo: normal-albedo grid covering the site (any
+            resolution) or None (0.15 everywhere).
+        model: CameraModel. hapke: HapkeParams. sensor: SensorParams.
+        dynamic_meshes: the rover's meshes (DynamicMesh, in their geometry frames).
+    """
+
+    def __init__(
+        self,
+        *,
+        heightfield,
+        albedo=None,
+        model: CameraModel = CameraModel(),
+        hapke: hapke_mod.HapkeParams = hapke_mod.HIGHLANDS_643NM,
+        sensor: sensor_mod.SensorParams = sensor_mod.CMV4000_NAVCAM,
+        dynamic_meshes=(),
+    ):
+        self.heightfield = heightfield
+        self.model = model
+        self.sensor = sensor
+        self._albedo = (
+            None
+            if albedo is None
+            else RasterSampler.on_heightfield(np.asarray(albedo, np.float32), heightfield)
+        )
+        self._brdf = brdf_from_reflectance(
+            functools.partial(
+                hapke_mod.blended_reflectance,
+                params=hapke,
+                start_deg=model.limb_blend_deg[0],
+                end_deg=model.limb_blend_deg[1],
+            )
+        )
+        self._config = ShadingConfig(shadow_samples=model.shadow_samples)
+        self._camera = model.pinhole()
+        self._raycaster = TerrainRaycaster()
+        self._lod = None
+        self._meshes = list(dynamic_meshes)
+        if self._meshes:
+            self._raycaster.set_dynamic_meshes(self._meshes, [np.eye(4)] * len(self._meshes))
+
+    @property
+    def raycaster(self) -> TerrainRaycaster:
+        return self._raycaster
+
+    def _ensure_lod(self, p_WC):
+        c = (float(p_WC[0]), float(p_WC[1]))
+        b = self.heightfield.bounds
+        c = (min(max(c[0], b.left), b.right), min(max(c[1], b.bottom), b.top))
+        if self._lod is None:
+            self._lod = TerrainLOD.build(
+                self.heightfield,
+                center_xy=c,
+                tile_px=self.model.tile_px,
+                near_radius_m=self.model.near_radius_m,
+            )
+            self._raycaster.set_terrain(self._lod)
+            self._centre = c
+        elif math.hypot(c[0] - self._centre[0], c[1] - self._centre[1]) > self.model.lod_recenter_m:
+            if self._lod.changes_at(c):
+                self._lod.recenter(c)
+                self._raycaster.set_terrain(self._lod)
+            self._centre = c
+
+    def illumination(
+        self,
+        *,
+        sun_dir_W,
+        sun_distance_km=AU_KM,
+        earth_dir_W=None,
+        earth_distance_km=384_400.0,
+        earth_phase=0.0,
+        spotlights=(),
+    ):
+        """``(Illumination, sun_up)`` for one instant (site-frame unit vectors, km).
+
+        Sun above the horizontal: direct sunlight (the lightmap adds terrain horizons)
+        plus the fill. Sun below it: no direct light; a weak fill
+        (``fill_fraction_sun_down``) from sunlit distant terrain, arriving from the
+        opposite azimuth at 5 deg elevation, unshadowed by the lightmap. Earthshine when
+        Earth is above the horizontal.
+        """
+        sun = np.asarray(sun_dir_W, float)
+        sun = sun / np.linalg.norm(sun)
+        e_sun = (AU_KM / float(sun_distance_km)) ** 2
+        earth, e_earth = None, 0.0
+        if earth_dir_W is not None and float(np.asarray(earth_dir_W)[2]) > 0.0:
+            earth = tuple(float(v) for v in earth_dir_W)
+            e_earth = e_sun * earthshine_fraction(
+                earth_distance_km=earth_distance_km, earth_phase=earth_phase
+            )
+        spots = tuple(spotlights)
+        if sun[2] > 0.0:
+            return Illumination(
+                sun_direction_W=tuple(sun),
+                sun_irradiance=e_sun,
+                fill_fraction=self.model.fill_fraction,
+                earth_direction_W=earth,
+                earth_irradiance=e_earth,
+                spotlights=spots,
+            ), True
+        h = np.array([-sun[0], -sun[1], 0.0])
+        h = (
+            h / max(np.linalg.norm(h), 1e-12)
+            if np.linalg.norm(h) > 1e-9
+            else np.array([1.0, 0.0, 0.0])
+        )
+        el = math.radians(5.0)
+        fill_dir = (h[0] * math.cos(el), h[1] * math.cos(el), math.sin(el))
+        return Illumination(
+            sun_direction_W=fill_dir,
+            sun_irradiance=self.model.fill_fraction_sun_down * e_sun,
+            fill_fraction=0.0,
+            earth_direction_W=earth,
+            earth_irradiance=e_earth,
+            spotlights=spots,
+        ), False
+
+    def shade(
+        self, *, X_WC, illumination: Illumination, dynamic_poses=(), lightmap=None, track_depth=None
+    ) -> ShadedImage:
+        """Ray-casts and shades one frame (I/F-like radiance, depth, label). Pass
+        ``lightmap=None`` when :meth:`illumination` says the Sun is down."""
+        X = np.asarray(X_WC.GetAsMatrix4() if hasattr(X_WC, "GetAsMatrix4") else X_WC, float)
+        self._ensure_lod(X[:3, 3])
+        if self._meshes:
+            self._raycaster.set_dynamic_poses(list(dynamic_poses))
+        return render(
+            self._raycaster,
+            self._camera,
+            X,
+            illumination,
+            brdf=self._brdf,
+            albedo=self._albedo,
+            lightmap=lightmap,
+            track_depth=track_depth,
+            config=self._config,
+        )
+
+    def expose(
+        self,
+        shaded: ShadedImage,
+        *,
+        exposure_s: float,
+        gain: float,
+        key: int,
+        frame_index: int,
+        sun_distance_km: float = AU_KM,
+    ) -> np.ndarray:
+        """The sensor's raw uint16 frame (12-bit codes) from a shaded image."""
+        L = sensor_mod.radiance_from_i_over_f(
+            np.maximum(shaded.radiance, 0.0),
+            params=self.sensor,
+            sun_distance_au=float(sun_distance_km) / AU_KM,
+        )
+        return sensor_mod.expose(
+            L,
+            exposure_s=exposure_s,
+            gain=gain,
+            params=self.sensor,
+            key=key,
+            frame_index=frame_index,
+        )
+
+
+__all__ = [
+    "CameraModel",
+    "DynamicMesh",
+    "SpotLight",
+    "TerrainCameraRenderer",
+    "earthshine_fraction",
+]
