@@ -49,6 +49,7 @@ def _cmd_run(args) -> int:
         meshcat=meshcat,
         duration=args.duration,
         progress=not args.no_progress,
+        cameras=not args.no_cameras,
     )
     t = result.timing
     s = result.summary["site"]
@@ -141,6 +142,22 @@ def _cmd_synth(args) -> int:
     return 0
 
 
+def _cmd_render(args) -> int:
+    from lunar_drake.render_cli import render_stereo
+    from lunar_drake.scenario import load_scenario
+
+    filename, name = _split_scenario(args.scenario)
+    scenario = load_scenario(
+        filename=filename, scenario_name=name, scenario_text=args.scenario_text
+    )
+    paths = render_stereo(
+        scenario=scenario, time_s=args.time, out_dir=args.out, progress=not args.no_progress
+    )
+    for p in paths:
+        print(p)
+    return 0
+
+
 def _cmd_slip_study(args) -> int:
     from lunar_drake.studies.slip_study import parse_slopes, run_slip_study, summarize
 
@@ -195,6 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--duration", type=float, default=None, help="simulated seconds (override)")
     r.add_argument("--out", default=None, help="run directory (default runs/<scenario>)")
     r.add_argument("--no-meshcat", action="store_true", help="headless, no Meshcat server")
+    r.add_argument("--no-cameras", action="store_true", help="skip the Hapke stereo cameras")
     r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.set_defaults(func=_cmd_run)
@@ -222,6 +240,24 @@ def build_parser() -> argparse.ArgumentParser:
     pe = sub.add_parser("ephemeris", help="Sun and Earth in a lunar site's sky (SPICE)")
     ephemeris_cli.add_arguments(pe)
     pe.set_defaults(func=ephemeris_cli.run_cli)
+
+    from lunar_drake.render import lightmap as lightmap_cli
+
+    pl = sub.add_parser("lightmap", help="bake a terrain lightmap (visible solar disk fraction)")
+    lightmap_cli.add_arguments(pl)
+    pl.set_defaults(func=lightmap_cli.run_cli)
+
+    rd = sub.add_parser("render", help="render the mast stereo pair of a scenario")
+    rd.add_argument(
+        "--scenario",
+        default="default",
+        help="scenario name in the packaged file, or FILE.yaml[:NAME]",
+    )
+    rd.add_argument("--scenario-text", default="{}", help="YAML overrides")
+    rd.add_argument("--time", type=float, default=0.0, help="sim time of the frame (s)")
+    rd.add_argument("--out", required=True, help="output directory")
+    rd.add_argument("--no-progress", action="store_true")
+    rd.set_defaults(func=_cmd_render)
 
     t = sub.add_parser("terrain", help="terrain tools")
     tsub = t.add_subparsers(dest="terrain_command", required=True)

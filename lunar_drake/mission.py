@@ -63,6 +63,7 @@ def run_mission(
     duration: float | None = None,
     cache_dir: str | Path | None = None,
     progress: bool = True,
+    cameras: bool = True,
 ) -> MissionResult:
     """Runs one mission headless (or with ``meshcat``) and writes the run directory.
 
@@ -83,7 +84,12 @@ def run_mission(
     t_site = time.perf_counter()
     heightfield, albedo = load_site_layers(site)
     mission = MakeMissionDiagram(
-        scenario=scenario, heightfield=heightfield, albedo=albedo, meshcat=meshcat
+        scenario=scenario,
+        heightfield=heightfield,
+        albedo=albedo,
+        meshcat=meshcat,
+        cameras=cameras,
+        duration_s=scenario.simulation_duration if duration is None else float(duration),
     )
     builder = DiagramBuilder()
     builder.AddSystem(mission)
@@ -94,6 +100,24 @@ def run_mission(
             loggers[name] = LogVectorOutput(
                 mission.GetOutputPort(name), builder, scenario.rover.log_period_s
             )
+    writer = None
+    if mission.HasOutputPort("camera.frame_index") and scenario.camera.save_frames:
+        from pydrake.systems.sensors import ImageGrey8U
+
+        from lunar_drake.systems.frame_writer import FrameWriter
+
+        writer = builder.AddSystem(
+            FrameWriter(
+                names=["left", "right"],
+                out_dir=out_dir / "frames",
+                rate_hz=scenario.camera.rate_hz,
+                preview_image_type=ImageGrey8U,
+            )
+        )
+        builder.Connect(mission.GetOutputPort("camera.frame_index"), writer.frame_index_input)
+        for n in ("left", "right"):
+            builder.Connect(mission.GetOutputPort(f"camera.{n}.raw"), writer.raw_inputs[n])
+            builder.Connect(mission.GetOutputPort(f"camera.{n}.preview"), writer.preview_inputs[n])
     diagram = builder.Build()
     diagram.set_name("run")
     simulator = Simulator(diagram)
@@ -163,6 +187,8 @@ def run_mission(
     if has_rover:
         root = simulator.get_context()
         summary["rover"] = _write_rover_logs(out_dir, loggers, root, scenario)
+    if writer is not None:
+        summary["camera_frames"] = len(writer.written)
     timing = {
         "site_s": t_site - t0,
         "site_cached": site.cached,

@@ -41,7 +41,7 @@ class SiteConfig:
     name: str = "near Mons Mouton (approximate)"
     latitude_deg: float = -85.4
     longitude_deg: float = 31.6
-    epoch_utc: str = "2027-11-20T12:00:00"
+    epoch_utc: str = "2027-11-15T00:00:00"
 
 
 @dc.dataclass
@@ -143,6 +143,50 @@ class RoverConfig:
 
 
 @dc.dataclass
+class CameraConfig:
+    """The mast stereo pair (Hapke camera; DESIGN.md decision 3).
+
+    Attributes:
+        enabled: render the stereo pair (``lunar-drake run --no-cameras`` turns it off).
+        width, height: image size (px). fov_y_deg: vertical field of view (deg).
+        rate_hz: frame rate (Hz). exposure_s, gain: sensor exposure (s) and analog gain.
+        shadow_samples: rays toward the solar disk per rover-shadow penumbra pixel.
+        lookahead_m: the gimbal points at the ground this far ahead of the rover (m).
+        save_frames: write every frame into the run directory (frames/).
+    """
+
+    enabled: bool = True
+    width: int = 640
+    height: int = 480
+    fov_y_deg: float = 45.0
+    rate_hz: float = 0.2
+    exposure_s: float = 0.002
+    gain: float = 1.0
+    shadow_samples: int = 8
+    lookahead_m: float = 6.0
+    save_frames: bool = True
+
+
+@dc.dataclass
+class LightingConfig:
+    """Sun, Earth and baked shadows.
+
+    Attributes:
+        ephemeris_update_s: how often Sun/Earth directions are recomputed (s).
+        lightmap: bake terrain-shadow lightmaps for the camera.
+        lightmap_interval_s: spacing of baked lightmaps (s; the paper planned hourly).
+        lightmap_max_px: bake on the DEM decimated to at most this many pixels a side.
+        extra_kernels: additional SPICE kernels (paths) furnished after the built-in ones.
+    """
+
+    ephemeris_update_s: float = 10.0
+    lightmap: bool = True
+    lightmap_interval_s: float = 3600.0
+    lightmap_max_px: int = 2048
+    extra_kernels: list[str] = dc.field(default_factory=list)
+
+
+@dc.dataclass
 class Scenario:
     """Everything a run needs. Field names are the YAML keys."""
 
@@ -152,6 +196,8 @@ class Scenario:
     terrain: TerrainConfig = dc.field(default_factory=TerrainConfig)
     terrain_view: TerrainViewConfig = dc.field(default_factory=TerrainViewConfig)
     rover: RoverConfig = dc.field(default_factory=RoverConfig)
+    camera: CameraConfig = dc.field(default_factory=CameraConfig)
+    lighting: LightingConfig = dc.field(default_factory=LightingConfig)
     simulator_config: SimulatorConfig = dc.field(
         default_factory=lambda: SimulatorConfig(
             max_step_size=0.01, accuracy=1.0e-3, use_error_control=False, target_realtime_rate=0.0
@@ -313,6 +359,23 @@ def validate_scenario(s: Scenario) -> None:
         _check(f"rover.route[{k}].vx_mps", seg.vx_mps, -5.0, 5.0, unit=" m/s")
         _check(f"rover.route[{k}].vy_mps", seg.vy_mps, -5.0, 5.0, unit=" m/s")
         _check(f"rover.route[{k}].wz_radps", seg.wz_radps, -2.0, 2.0, unit=" rad/s")
+    c = s.camera
+    _check("camera.width", c.width, 16, 8192, unit=" px")
+    _check("camera.height", c.height, 16, 8192, unit=" px")
+    _check("camera.fov_y_deg", c.fov_y_deg, 1.0, 170.0, unit=" deg")
+    _check("camera.rate_hz", c.rate_hz, 0.0, 100.0, lo_open=True, unit=" Hz")
+    _check("camera.exposure_s", c.exposure_s, 0.0, 10.0, lo_open=True, unit=" s")
+    _check("camera.gain", c.gain, 0.0, 64.0, lo_open=True)
+    _check("camera.shadow_samples", c.shadow_samples, 1, 64)
+    _check("camera.lookahead_m", c.lookahead_m, 0.5, 1000.0, unit=" m")
+    li = s.lighting
+    _check("lighting.ephemeris_update_s", li.ephemeris_update_s, 0.0, 86400.0, lo_open=True,
+           unit=" s")
+    _check("lighting.lightmap_interval_s", li.lightmap_interval_s, 60.0, 1.0e6, unit=" s")
+    _check("lighting.lightmap_max_px", li.lightmap_max_px, 64, 16384, unit=" px")
+    for k in li.extra_kernels:
+        if not Path(k).is_file():
+            raise ConfigError(f"lighting.extra_kernels: {k!r} does not exist")
     if s.plant_config.time_step <= 0 and r.enabled:
         raise ConfigError("plant_config.time_step must be > 0 (a discrete SAP plant) with a rover")
     if not math.isfinite(s.simulation_duration):

@@ -19,9 +19,12 @@ from pydrake.systems.primitives import ConstantVectorSource, SharedPointerSystem
 from pydrake.visualization import ApplyVisualizationConfig
 
 from lunar_drake.diagrams.rover import add_rover_model, check_soil_name, spawn_pose, wire_rover
+from lunar_drake.ephemeris.sun_earth import SiteLocation
 from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.energy_meter import EnergyMeter
+from lunar_drake.systems.ephemeris_source import EphemerisSource
+from lunar_drake.systems.meshcat_sun import MeshcatSun
 from lunar_drake.systems.rover_kinematics import TwistSchedule
 from lunar_drake.systems.terrain_source import TerrainSource
 from lunar_drake.systems.terrain_visualizer import TerrainVisualizer
@@ -46,6 +49,8 @@ def MakeMissionDiagram(
     heightfield: Heightfield,
     albedo: np.ndarray | None = None,
     meshcat=None,
+    cameras: bool = True,
+    duration_s: float | None = None,
 ):
     """Builds the mission diagram (named ``mission``).
 
@@ -54,17 +59,22 @@ def MakeMissionDiagram(
         heightfield: the site terrain.
         albedo: optional albedo grid for the Meshcat terrain colours.
         meshcat: a pydrake Meshcat, or None for headless runs.
+        cameras: add the mast stereo pair (when the scenario enables it).
+        duration_s: how long it will be simulated (s; default the scenario's), so time-
+            tabulated inputs (baked lightmaps) cover the run.
 
     Exported output ports: ``terrain.heightfield`` and, with a rover, :data:`ROVER_PORTS`
     (``rover.pose`` is ground truth for scoring: x, y, z, roll, pitch, yaw, linear and
-    angular velocity in the site frame).
+    angular velocity in the site frame), ``sun.direction_W``, ``sun.elevation_deg`` and,
+    with cameras, ``camera.{left,right}.{raw,preview,depth,label}`` and
+    ``camera.frame_index``. Sun and Earth directions are in the site's grid frame.
 
     Raises:
         OutOfBoundsError / NoDataError: the rover spawn is off the raster or over a hole.
         ConfigError: unknown soil or an invalid rover description.
     """
     builder = DiagramBuilder()
-    plant, _scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
+    plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -LUNAR_GRAVITY_MPS2])
     rc = scenario.rover
     rover = None
@@ -74,6 +84,19 @@ def MakeMissionDiagram(
     plant.Finalize()
     terrain = builder.AddNamedSystem("terrain", TerrainSource(heightfield=heightfield))
     builder.ExportOutput(terrain.heightfield_output, "terrain.heightfield")
+    site = SiteLocation(scenario.site.latitude_deg, scenario.site.longitude_deg)
+    ephem = builder.AddNamedSystem(
+        "ephemeris",
+        EphemerisSource(
+            site=site,
+            epoch_utc=scenario.site.epoch_utc,
+            extra_kernels=scenario.lighting.extra_kernels,
+            update_period_s=scenario.lighting.ephemeris_update_s,
+            world_frame="polar_grid",
+        ),
+    )
+    builder.ExportOutput(ephem.GetOutputPort("sun_direction_W"), "sun.direction_W")
+    builder.ExportOutput(ephem.GetOutputPort("sun_elevation_deg"), "sun.elevation_deg")
     if rover is not None:
         X_WC = spawn_pose(
             heightfield=heightfield,
@@ -126,6 +149,19 @@ def MakeMissionDiagram(
         builder.ExportOutput(meter.energy_output, "rover.energy")
         builder.ExportOutput(h.contact.off_terrain_output, "rover.off_terrain")
         builder.ExportOutput(route.twist_output, "rover.twist_command")
+        if cameras and scenario.camera.enabled:
+            _add_cameras(
+                builder,
+                scenario=scenario,
+                plant=plant,
+                scene_graph=scene_graph,
+                rover=rover,
+                heightfield=heightfield,
+                albedo=albedo,
+                ephem=ephem,
+                site=site,
+                duration_s=scenario.simulation_duration if duration_s is None else duration_s,
+            )
     if meshcat is not None:
         view = builder.AddNamedSystem(
             "terrain_view",
@@ -137,6 +173,8 @@ def MakeMissionDiagram(
             ),
         )
         builder.Connect(terrain.heightfield_output, view.heightfield_input)
+        sun = builder.AddNamedSystem("meshcat_sun", MeshcatSun(meshcat=meshcat))
+        builder.Connect(ephem.GetOutputPort("sun_direction_W"), sun.sun_direction_input)
         # Drake's LCM publishers go to an in-process bus (no network traffic); the diagram
         # owns that bus so it lives as long as the publishers.
         lcm = DrakeLcm("memq://lunar_drake")
@@ -145,3 +183,73 @@ def MakeMissionDiagram(
     diagram = builder.Build()
     diagram.set_name("mission")
     return diagram
+
+
+def _add_cameras(
+    builder, *, scenario, plant, scene_graph, rover, heightfield, albedo, ephem, site, duration_s
+):
+    """The mast stereo pair: HapkeCamera fed by the plant, SceneGraph, the ephemeris and
+    the baked lightmaps."""
+    from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+    from lunar_drake.systems.hapke_camera import CameraMount, HapkeCamera, rover_meshes
+    from lunar_drake.systems.lightmap_source import LightmapSource
+
+    c = scenario.camera
+    model = CameraModel(
+        width=c.width,
+        height=c.height,
+        fov_y_deg=c.fov_y_deg,
+        exposure_s=c.exposure_s,
+        gain=c.gain,
+        shadow_samples=c.shadow_samples,
+    )
+    geometry = rover_meshes(
+        plant, scene_graph, rover.model_instance,
+        exclude_bodies=[rover.left_camera.body().index(), rover.right_camera.body().index()],
+    )
+    renderer = TerrainCameraRenderer(
+        heightfield=heightfield, albedo=albedo, model=model, dynamic_meshes=[m for _, m in geometry]
+    )
+    mounts = [
+        CameraMount(name=n, body_index=f.body().index(), X_BC=f.GetFixedPoseInBodyFrame())
+        for n, f in (("left", rover.left_camera), ("right", rover.right_camera))
+    ]
+    cam = builder.AddNamedSystem(
+        "camera",
+        HapkeCamera(
+            renderer=renderer,
+            mounts=mounts,
+            rover_geometry=geometry,
+            rate_hz=c.rate_hz,
+            seed=scenario.random_seed,
+            name="camera",
+        ),
+    )
+    builder.Connect(plant.get_body_poses_output_port(), cam.body_poses_input)
+    builder.Connect(scene_graph.get_query_output_port(), cam.geometry_query_input)
+    for port in (
+        "sun_direction_W",
+        "sun_distance_km",
+        "earth_direction_W",
+        "earth_distance_km",
+        "earth_phase",
+    ):
+        builder.Connect(ephem.GetOutputPort(port), cam.GetInputPort(port))
+    if scenario.lighting.lightmap:
+        lm = builder.AddNamedSystem(
+            "lightmaps",
+            LightmapSource(
+                heightfield=heightfield,
+                site=site,
+                epoch_utc=scenario.site.epoch_utc,
+                duration_s=duration_s,
+                interval_s=scenario.lighting.lightmap_interval_s,
+                max_px=scenario.lighting.lightmap_max_px,
+                extra_kernels=scenario.lighting.extra_kernels,
+            ),
+        )
+        builder.Connect(lm.lightmap_output, cam.lightmap_input)
+    for name, port in cam.ports.items():
+        builder.ExportOutput(port, f"camera.{name}")
+    builder.ExportOutput(cam.frame_index_output, "camera.frame_index")
+    return cam

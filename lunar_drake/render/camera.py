@@ -34,7 +34,8 @@ from lunar_drake.render.shading import (
     ShadingConfig,
     SpotLight,
     brdf_from_reflectance,
-    render,
+    shade,
+    trace,
 )
 from lunar_drake.render.terrain_lod import TerrainLOD
 
@@ -57,6 +58,8 @@ class CameraModel:
         fill_fraction_sun_down: fill fraction when the Sun is below the horizon (light
             scattered from sunlit distant terrain; an assumption).
         limb_blend_deg: emission angles (deg) over which Hapke blends into Lunar-Lambert.
+        normal_map_max_px: the smooth-shading normal map is built from the DEM decimated
+            to at most this many pixels a side (0: use the LOD triangles' flat normals).
     """
 
     width: int = 1280
@@ -71,6 +74,7 @@ class CameraModel:
     fill_fraction: float = 0.03
     fill_fraction_sun_down: float = 0.003
     limb_blend_deg: tuple[float, float] = (84.0, 89.0)
+    normal_map_max_px: int = 4096
 
     def __post_init__(self):
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
@@ -93,6 +97,23 @@ class CameraModel:
 def earthshine_fraction(*, earth_distance_km: float, earth_phase: float) -> float:
     """Earthshine irradiance as a fraction of the solar irradiance (see module doc)."""
     return EARTH_BOND_ALBEDO * (EARTH_RADIUS_KM / earth_distance_km) ** 2 * float(earth_phase)
+
+
+def _normal_samplers(heightfield, *, max_px: int):
+    """Bilinear samplers of the DEM's unit-normal x and y components (site frame)."""
+    if max_px <= 0:
+        return None
+    from lunar_drake.terrain.surface import normals_from_dem
+
+    z, res = heightfield.decimated(max_size=max_px)
+    z = np.asarray(z, np.float32)
+    if np.isnan(z).any():
+        z = np.where(np.isnan(z), np.float32(np.nanmean(z)), z)
+    n = normals_from_dem(np.pad(z, 1, mode="edge"), resolution_m=res)
+    return (
+        RasterSampler.on_heightfield(n[0], heightfield, outside=0.0),
+        RasterSampler.on_heightfield(n[1], heightfield, outside=0.0),
+    )
 
 
 class TerrainCameraRenderer:
@@ -132,6 +153,7 @@ class TerrainCameraRenderer:
             )
         )
         self._config = ShadingConfig(shadow_samples=model.shadow_samples)
+        self._normals = _normal_samplers(heightfield, max_px=model.normal_map_max_px)
         self._camera = model.pinhole()
         self._raycaster = TerrainRaycaster()
         self._lod = None
@@ -225,10 +247,21 @@ class TerrainCameraRenderer:
         self._ensure_lod(X[:3, 3])
         if self._meshes:
             self._raycaster.set_dynamic_poses(list(dynamic_poses))
-        return render(
+        gb = trace(self._raycaster, self._camera, X)
+        if self._normals is not None and gb.index.size:
+            # Smooth shading: terrain normals from the DEM's normal map (bilinear), not
+            # the flat LOD triangles (which show as facets under a grazing Sun).
+            t = gb.terrain
+            x, y = gb.position[0, t], gb.position[1, t]
+            nx = self._normals[0](x, y)
+            ny = self._normals[1](x, y)
+            nz = np.sqrt(np.clip(1.0 - nx * nx - ny * ny, 1e-6, 1.0))
+            n = gb.normal.copy()
+            n[0, t], n[1, t], n[2, t] = nx, ny, nz
+            gb = dc.replace(gb, normal=n)
+        return shade(
+            gb,
             self._raycaster,
-            self._camera,
-            X,
             illumination,
             brdf=self._brdf,
             albedo=self._albedo,

@@ -379,7 +379,9 @@ def _skirt_edges(nr, nc, tr, tc, pr, pc, nrows, ncols):
 
 def _skirt_bottoms(hf: Heightfield, tile_px: int, margin: float) -> np.ndarray:
     """Per tile: min DEM value over the 3 x 3 tiles around it, minus ``margin`` (m)."""
-    lvl = round(math.log2(tile_px))
+    # A tile larger than the raster uses the coarsest level (the global min: conservative).
+    top = max(0, math.ceil(math.log2(max(hf.shape))))
+    lvl = min(round(math.log2(tile_px)), top)
     pyr = hf.pyramid(start_level=lvl)
     zmin = pyr.levels[lvl][0].astype(np.float64)  # type: ignore[index]
     nt = _tile_counts(hf.shape, tile_px)

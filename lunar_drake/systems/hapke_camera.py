@@ -1,0 +1,285 @@
+"""HapkeCamera: a stereo (or single) camera rendering the Hapke-lit terrain and the rover."""
+
+from __future__ import annotations
+
+import dataclasses as dc
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import QueryObject, Role
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.sensors import ImageDepth32F, ImageGrey8U, ImageLabel16I
+
+from lunar_drake import rng
+from lunar_drake.errors import LunarDrakeError, OutOfRangeError, SimulationError
+from lunar_drake.render import sensor as sensor_mod
+from lunar_drake.render.camera import AU_KM, TerrainCameraRenderer
+from lunar_drake.render.raycast import DynamicMesh
+from lunar_drake.render.shapes import shape_mesh
+
+
+@dc.dataclass(frozen=True)
+class CameraMount:
+    """A camera rigidly attached to a plant body: name, BodyIndex and X_BC (Drake camera
+    convention: +z optical axis, +x right, +y down)."""
+
+    name: str
+    body_index: object
+    X_BC: RigidTransform
+
+
+@dc.dataclass
+class Frame:
+    """One camera's latest frame: raw uint16 (12-bit codes), 8-bit preview, depth (m),
+    label (0 sky, 1 terrain, 2 rover), I/F radiance, capture time and index."""
+
+    raw: np.ndarray
+    preview: np.ndarray
+    depth: np.ndarray
+    label: np.ndarray
+    radiance: np.ndarray
+    time_s: float
+    index: int
+
+
+def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exclude_bodies=()):
+    """Illustration geometry of a model instance as (GeometryId, DynamicMesh) pairs,
+    leaving out ``exclude_bodies`` (e.g. the camera head the cameras sit inside)."""
+    inspector = scene_graph.model_inspector()
+    skip = {int(b) for b in exclude_bodies}
+    out = []
+    for b in plant.GetBodyIndices(model_instance):
+        if int(b) in skip:
+            continue
+        fid = plant.GetBodyFrameIdIfExists(b)
+        if fid is None:
+            continue
+        for gid in inspector.GetGeometries(fid, Role.kIllustration):
+            mesh = shape_mesh(inspector.GetShape(gid))
+            if mesh is None:
+                continue
+            out.append((gid, DynamicMesh(vertices=mesh[0], faces=mesh[1], albedo=albedo)))
+    return out
+
+
+class HapkeCamera(LeafSystem):
+    """Renders every mounted camera at ``rate_hz`` (periodic unrestricted update) and
+    holds the frames in its state, so outputs are cheap and deterministic.
+
+    .. pydrake_system::
+
+        name: HapkeCamera
+        input_ports:
+        - body_poses
+        - geometry_query
+        - sun_direction_W
+        - sun_distance_km
+        - earth_direction_W
+        - earth_distance_km
+        - earth_phase
+        - exposure (optional)
+        - lightmap (optional)
+        - track_depth (optional)
+        output_ports:
+        - <name>.raw
+        - <name>.preview
+        - <name>.depth
+        - <name>.label
+
+    ``exposure`` is (exposure_s, gain); unconnected, the CameraModel defaults are used.
+    Exposure <= 0 or gain <= 0 raises OutOfRangeError. ``lightmap`` / ``track_depth``
+    are abstract callables ``(x, y) -> value`` in site coordinates (lit fraction, groove
+    depth in m). Sensor noise is keyed by (seed, system name, camera, frame index).
+    ``<name>.raw`` is an abstract uint16 numpy array (12-bit codes); preview, depth and
+    label are Drake images. Vectors are in the world (site) frame.
+
+    Args:
+        renderer: a TerrainCameraRenderer (shared by the mounts).
+        mounts: CameraMount list (e.g. left and right of a stereo pair).
+        rover_geometry: (GeometryId, DynamicMesh) pairs drawn and shadowed from
+            SceneGraph poses. rate_hz: frame rate. seed, name: noise stream.
+    """
+
+    def __init__(
+        self,
+        *,
+        renderer: TerrainCameraRenderer,
+        mounts,
+        rover_geometry=(),
+        rate_hz: float = 1.0,
+        seed: int = 0,
+        name: str = "camera",
+    ):
+        super().__init__()
+        if not 0 < rate_hz <= 100:
+            raise OutOfRangeError(f"rate_hz = {rate_hz!r}; allowed (0, 100] Hz")
+        self._r = renderer
+        self._mounts = list(mounts)
+        self._gids = [g for g, _ in rover_geometry]
+        self._rate = float(rate_hz)
+        self._keys = {m.name: rng.stream_key(seed, f"{name}/{m.name}") for m in self._mounts}
+        m = renderer.model
+        self.body_poses_input = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
+        self.geometry_query_input = self.DeclareAbstractInputPort(
+            "geometry_query", AbstractValue.Make(QueryObject())
+        )
+        self.sun_direction_input = self.DeclareVectorInputPort("sun_direction_W", 3)
+        self.sun_distance_input = self.DeclareVectorInputPort("sun_distance_km", 1)
+        self.earth_direction_input = self.DeclareVectorInputPort("earth_direction_W", 3)
+        self.earth_distance_input = self.DeclareVectorInputPort("earth_distance_km", 1)
+        self.earth_phase_input = self.DeclareVectorInputPort("earth_phase", 1)
+        self.exposure_input = self.DeclareVectorInputPort("exposure", 2)
+        self.lightmap_input = self.DeclareAbstractInputPort(
+            "lightmap", AbstractValue.Make(object())
+        )
+        self.track_depth_input = self.DeclareAbstractInputPort(
+            "track_depth", AbstractValue.Make(object())
+        )
+        blank = {mt.name: _blank(m.width, m.height) for mt in self._mounts}
+        self._state = self.DeclareAbstractState(AbstractValue.Make(blank))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / self._rate, 0.0, self._update)
+        self.ports = {}
+        for mt in self._mounts:
+            n = mt.name
+            self.ports[f"{n}.raw"] = self.DeclareAbstractOutputPort(
+                f"{n}.raw",
+                lambda: AbstractValue.Make(np.zeros((1, 1), np.uint16)),
+                lambda c, o, n=n: o.set_value(self._frames(c)[n].raw),
+                prerequisites_of_calc={self.all_state_ticket()},
+            )
+            self.ports[f"{n}.preview"] = self.DeclareAbstractOutputPort(
+                f"{n}.preview",
+                lambda: AbstractValue.Make(ImageGrey8U(m.width, m.height)),
+                lambda c, o, n=n: self._to_image(o, ImageGrey8U, self._frames(c)[n].preview),
+                prerequisites_of_calc={self.all_state_ticket()},
+            )
+            self.ports[f"{n}.depth"] = self.DeclareAbstractOutputPort(
+                f"{n}.depth",
+                lambda: AbstractValue.Make(ImageDepth32F(m.width, m.height)),
+                lambda c, o, n=n: self._to_image(o, ImageDepth32F, self._frames(c)[n].depth),
+                prerequisites_of_calc={self.all_state_ticket()},
+            )
+            self.ports[f"{n}.label"] = self.DeclareAbstractOutputPort(
+                f"{n}.label",
+                lambda: AbstractValue.Make(ImageLabel16I(m.width, m.height)),
+                lambda c, o, n=n: self._to_image(o, ImageLabel16I, self._frames(c)[n].label),
+                prerequisites_of_calc={self.all_state_ticket()},
+            )
+        self.frame_index_output = self.DeclareVectorOutputPort(
+            "frame_index",
+            BasicVector(1),
+            lambda c, o: o.SetFromVector([next(iter(self._frames(c).values())).index]),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )
+
+    def _frames(self, context) -> dict:
+        return context.get_abstract_state(0).get_value()
+
+    @staticmethod
+    def _to_image(output, cls, array):
+        img = output.get_mutable_value()
+        if img.width() != array.shape[1] or img.height() != array.shape[0]:
+            img.resize(array.shape[1], array.shape[0])
+        img.mutable_data[:, :, 0] = array
+
+    def frame(self, context, name: str) -> Frame:
+        """The latest Frame of camera ``name`` in this system's context."""
+        return self._frames(context)[name]
+
+    def _optional(self, port, context):
+        return port.Eval(context) if port.HasValue(context) else None
+
+    def _update(self, context, state):
+        t = context.get_time()
+        index = round(t * self._rate)
+        poses = self.body_poses_input.Eval(context)
+        query = self.geometry_query_input.Eval(context)
+        sun = self.sun_direction_input.Eval(context)
+        sun_d = float(self.sun_distance_input.Eval(context)[0]) or AU_KM
+        earth = self.earth_direction_input.Eval(context)
+        earth_d = float(self.earth_distance_input.Eval(context)[0]) or 384_400.0
+        phase = float(self.earth_phase_input.Eval(context)[0])
+        expo = self._optional(self.exposure_input, context)
+        model = self._r.model
+        exposure_s, gain = (
+            (model.exposure_s, model.gain) if expo is None else (float(expo[0]), float(expo[1]))
+        )
+        if not exposure_s > 0:
+            raise OutOfRangeError(f"camera exposure = {exposure_s!r} s; must be > 0")
+        if not gain > 0:
+            raise OutOfRangeError(f"camera gain = {gain!r}; must be > 0")
+        lightmap = self._optional(self.lightmap_input, context)
+        tracks = self._optional(self.track_depth_input, context)
+        illum, sun_up = self._r.illumination(
+            sun_dir_W=sun,
+            sun_distance_km=sun_d,
+            earth_dir_W=earth if np.any(earth) else None,
+            earth_distance_km=earth_d,
+            earth_phase=phase,
+        )
+        dyn = [query.GetPoseInWorld(g).GetAsMatrix4() for g in self._gids]
+        frames = {}
+        for mt in self._mounts:
+            X_WC = poses[int(mt.body_index)].multiply(mt.X_BC)
+            self._check_above_terrain(mt.name, X_WC.translation(), t)
+            shaded = self._r.shade(
+                X_WC=X_WC,
+                illumination=illum,
+                dynamic_poses=dyn,
+                lightmap=lightmap if sun_up else None,
+                track_depth=tracks,
+            )
+            raw = self._r.expose(
+                shaded,
+                exposure_s=exposure_s,
+                gain=gain,
+                key=self._keys[mt.name],
+                frame_index=index,
+                sun_distance_km=sun_d,
+            )
+            preview = sensor_mod.to_preview_8bit(
+                raw,
+                params=self._r.sensor,
+                auto=False,
+                full_scale=float(2**self._r.sensor.adc_bits - 1),
+            )
+            depth = np.where(np.isfinite(shaded.depth), shaded.depth, np.inf).astype(np.float32)
+            frames[mt.name] = Frame(
+                raw=raw,
+                preview=preview,
+                depth=depth,
+                label=shaded.label.astype(np.int16),
+                radiance=shaded.radiance,
+                time_s=t,
+                index=index,
+            )
+        state.get_mutable_abstract_state(0).set_value(frames)
+
+    def _check_above_terrain(self, name: str, p, t: float) -> None:
+        hf = self._r.heightfield
+        b = hf.bounds
+        if b.left <= p[0] <= b.right and b.bottom <= p[1] <= b.top:
+            try:
+                z = float(hf.height(np.array([p[0]]), np.array([p[1]]))[0])
+            except LunarDrakeError:
+                return
+            if p[2] <= z:
+                raise SimulationError(
+                    f"camera {name!r} at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}) m is inside the "
+                    f"terrain (ground at {z:.2f} m) at t = {t:.2f} s"
+                )
+
+
+def _blank(w: int, h: int) -> Frame:
+    return Frame(
+        raw=np.zeros((h, w), np.uint16),
+        preview=np.zeros((h, w), np.uint8),
+        depth=np.full((h, w), np.inf, np.float32),
+        label=np.zeros((h, w), np.int16),
+        radiance=np.zeros((h, w), np.float32),
+        time_s=-1.0,
+        index=-1,
+    )

@@ -1,0 +1,126 @@
+"""The Hapke camera: closed-form shading of a flat plane, determinism, the stereo pair in
+the mission diagram, Sun below the horizon, bad exposure and a camera inside the ground."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+
+from lunar_drake.errors import OutOfRangeError
+from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+from lunar_drake.render.hapke import HIGHLANDS_643NM, hapke_reflectance
+from lunar_drake.terrain.heightfield import Heightfield
+
+
+def _flat(n=128, res=0.25):
+    return Heightfield.from_array(np.zeros((n, n), np.float32), resolution_m=res)
+
+
+def _down_camera(height=3.0):
+    # Camera +z (optical axis) = world -z, +x = world +x, +y = world -y.
+    R = RotationMatrix(np.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]]))
+    return RigidTransform(R, [0.0, 0.0, height])
+
+
+def test_flat_plane_matches_closed_form_hapke():
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=65, height=49))
+    el = math.radians(30.0)
+    illum, up = r.illumination(sun_dir_W=(math.cos(el), 0.0, math.sin(el)))
+    assert up
+    img = r.shade(X_WC=_down_camera(), illumination=illum)
+    centre = float(img.radiance[24, 32])
+    # Sun and the 3 % fill (opposite azimuth, same elevation) both see cos_i = sin(30),
+    # cos_e = 1 and phase 60 deg at the nadir pixel: I/F = pi * 1.03 * r.
+    refl = float(hapke_reflectance(0.5, 1.0, math.radians(60.0), params=HIGHLANDS_643NM,
+                                   dtype=np.float64))
+    assert centre == pytest.approx(math.pi * 1.03 * refl, rel=1e-4)
+    assert img.label[24, 32] == 1
+    assert float(img.depth[24, 32]) == pytest.approx(3.0, rel=1e-5)
+
+
+def test_sensor_frames_are_bit_identical_and_exposure_checked():
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    illum, _ = r.illumination(sun_dir_W=(0.9, 0.0, 0.43))
+    img = r.shade(X_WC=_down_camera(), illumination=illum)
+    a = r.expose(img, exposure_s=0.002, gain=1.0, key=7, frame_index=3)
+    b = r.expose(img, exposure_s=0.002, gain=1.0, key=7, frame_index=3)
+    c = r.expose(img, exposure_s=0.002, gain=1.0, key=7, frame_index=4)
+    assert a.dtype == np.uint16 and a.max() <= 4095
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    assert r.expose(img, exposure_s=0.004, gain=1.0, key=7, frame_index=3).mean() > a.mean()
+    with pytest.raises(OutOfRangeError, match="exposure"):
+        r.expose(img, exposure_s=0.0, gain=1.0, key=7, frame_index=3)
+    with pytest.raises(OutOfRangeError, match="exposure_s"):
+        CameraModel(exposure_s=-1.0)
+
+
+def test_sun_below_horizon_is_dark_but_not_black():
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    day, _ = r.illumination(sun_dir_W=(0.9, 0.0, 0.2))
+    night, up = r.illumination(sun_dir_W=(0.99, 0.0, -0.05), earth_dir_W=(0.0, 0.9, 0.4),
+                               earth_distance_km=384_400.0, earth_phase=0.8)
+    assert not up
+    lit = r.shade(X_WC=_down_camera(), illumination=day).radiance
+    dark = r.shade(X_WC=_down_camera(), illumination=night).radiance
+    assert 0 < dark.mean() < 0.05 * lit.mean()
+    # Earthshine alone is tiny but present.
+    only_earth, _ = r.illumination(sun_dir_W=(0.99, 0.0, -0.05), earth_dir_W=(0.0, 0.9, 0.4),
+                                   earth_distance_km=384_400.0, earth_phase=0.8)
+    assert only_earth.earth_irradiance > 0
+
+
+def test_mission_stereo_pair_renders_terrain_and_is_deterministic(tmp_path, monkeypatch):
+    from pydrake.systems.analysis import Simulator
+
+    from lunar_drake.diagrams.mission import MakeMissionDiagram
+    from lunar_drake.mission import load_site_layers
+    from lunar_drake.scenario import load_scenario
+    from lunar_drake.site import ensure_site
+
+    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    s = load_scenario(scenario_name="small",
+                      scenario_text="{camera: {width: 96, height: 72, rate_hz: 1.0}}")
+    hf, alb = load_site_layers(ensure_site(s, progress=False))
+    frames = []
+    for _ in range(2):
+        d = MakeMissionDiagram(scenario=s, heightfield=hf, albedo=alb, duration_s=2.0)
+        sim = Simulator(d)
+        sim.AdvanceTo(1.5)
+        cam = d.GetSubsystemByName("camera")
+        ctx = cam.GetMyContextFromRoot(sim.get_context())
+        frames.append({n: cam.frame(ctx, n) for n in ("left", "right")})
+    left, right = frames[0]["left"], frames[0]["right"]
+    assert left.index == 1 and left.raw.shape == (72, 96)
+    assert (left.label == 1).mean() > 0.2  # terrain in view
+    assert left.raw.max() > 100  # lit terrain registers
+    assert not np.array_equal(left.raw, right.raw)  # a stereo baseline apart
+    for n in ("left", "right"):
+        assert np.array_equal(frames[0][n].raw, frames[1][n].raw)
+    out = d.GetOutputPort("camera.left.preview").Eval(d.GetMyContextFromRoot(sim.get_context()))
+    assert out.width() == 96 and out.height() == 72
+
+
+def test_camera_inside_the_terrain_is_an_error():
+    from pydrake.systems.framework import DiagramBuilder
+
+    from lunar_drake.errors import SimulationError
+    from lunar_drake.systems.hapke_camera import CameraMount, HapkeCamera
+
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=32, height=24))
+    cam = HapkeCamera(renderer=r, mounts=[CameraMount("left", 0, RigidTransform())])
+    ctx = cam.CreateDefaultContext()
+    cam.body_poses_input.FixValue(ctx, [RigidTransform([0.0, 0.0, -0.5])])
+    from pydrake.geometry import QueryObject
+
+    cam.geometry_query_input.FixValue(ctx, QueryObject())
+    cam.sun_direction_input.FixValue(ctx, [0.9, 0.0, 0.4])
+    cam.sun_distance_input.FixValue(ctx, [1.496e8])
+    cam.earth_direction_input.FixValue(ctx, [0.0, 0.0, 0.0])
+    cam.earth_distance_input.FixValue(ctx, [3.84e5])
+    cam.earth_phase_input.FixValue(ctx, [0.0])
+    state = cam.AllocateDiscreteVariables()
+    assert DiagramBuilder  # (imported to keep the example self-contained)
+    with pytest.raises(SimulationError, match="inside the terrain"):
+        cam._update(ctx, ctx.get_mutable_state())
+    del state
