@@ -193,7 +193,7 @@ def test_default_rover_drives_100_m_over_the_default_site(cache, tmp_path):
 
     scenario = load_scenario(scenario_name="default")
     result = run_mission(scenario=scenario, scenario_name="default", out_dir=tmp_path,
-                         progress=False)
+                         progress=False, cameras=False)
     rv = result.summary["rover"]
     assert result.summary["stop_reason"] == "duration reached"
     assert rv["distance_m"] >= 100.0

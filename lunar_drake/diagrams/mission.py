@@ -156,6 +156,7 @@ def MakeMissionDiagram(
                 plant=plant,
                 scene_graph=scene_graph,
                 rover=rover,
+                contact=h.contact,
                 heightfield=heightfield,
                 albedo=albedo,
                 ephem=ephem,
@@ -186,13 +187,25 @@ def MakeMissionDiagram(
 
 
 def _add_cameras(
-    builder, *, scenario, plant, scene_graph, rover, heightfield, albedo, ephem, site, duration_s
+    builder,
+    *,
+    scenario,
+    plant,
+    scene_graph,
+    rover,
+    contact,
+    heightfield,
+    albedo,
+    ephem,
+    site,
+    duration_s,
 ):
     """The mast stereo pair: HapkeCamera fed by the plant, SceneGraph, the ephemeris and
     the baked lightmaps."""
     from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
     from lunar_drake.systems.hapke_camera import CameraMount, HapkeCamera, rover_meshes
     from lunar_drake.systems.lightmap_source import LightmapSource
+    from lunar_drake.systems.wheel_tracks import WheelTracks
 
     c = scenario.camera
     model = CameraModel(
@@ -204,7 +217,9 @@ def _add_cameras(
         shadow_samples=c.shadow_samples,
     )
     geometry = rover_meshes(
-        plant, scene_graph, rover.model_instance,
+        plant,
+        scene_graph,
+        rover.model_instance,
         exclude_bodies=[rover.left_camera.body().index(), rover.right_camera.body().index()],
     )
     renderer = TerrainCameraRenderer(
@@ -249,6 +264,16 @@ def _add_cameras(
             ),
         )
         builder.Connect(lm.lightmap_output, cam.lightmap_input)
+    tracks = builder.AddNamedSystem(
+        "rover.tracks",
+        WheelTracks(
+            wheel_bodies=[b.index() for b in rover.wheels],
+            wheel_width_m=rover.description.wheel_width_m,
+        ),
+    )
+    builder.Connect(plant.get_body_poses_output_port(), tracks.body_poses_input)
+    builder.Connect(contact.wheel_state_output, tracks.wheel_state_input)
+    builder.Connect(tracks.track_depth_output, cam.track_depth_input)
     for name, port in cam.ports.items():
         builder.ExportOutput(port, f"camera.{name}")
     builder.ExportOutput(cam.frame_index_output, "camera.frame_index")

@@ -62,15 +62,21 @@ from lunar_drake.render.horizon import (
 )
 
 __all__ = [
+    "LIMBS",
     "LIMB_DARKENING_U",
     "SUN_ANGULAR_RADIUS_DEG",
     "LightmapSeries",
+    "add_arguments",
     "interpolate_lightmap",
     "lightmap",
     "lightmap_bruteforce",
+    "lightmap_dask",
     "lightmap_from_horizon",
     "lightmap_series",
+    "run_cli",
     "solar_disk_visible_fraction",
+    "sun_in_grid_frame",
+    "sunflower_disk",
 ]
 
 SUN_ANGULAR_RADIUS_DEG = 0.2665
@@ -136,7 +142,9 @@ _LUT_V = np.linspace(-1.0, 1.0, _LUT_N)
 
 
 def _fraction_lut(limb: str, u_ld: float) -> np.ndarray:
-    return _fraction_of_offset(_LUT_V, limb, u_ld)
+    lut = _fraction_of_offset(_LUT_V, limb, u_ld)
+    lut[0], lut[-1] = 0.0, 1.0  # exactly dark / lit beyond the disk
+    return lut
 
 
 # ----------------------------------------------------------------------------------------
@@ -171,27 +179,75 @@ def _check_mask(horizon_mask) -> HorizonMask:
     return mask
 
 
+def _sun_tilt(shape, res: float, az_deg: float, window, moon_radius_m: float):
+    """``(rows_term, cols_term)`` (rad, float64) with ``delta[r, c] = rows[r] + cols[c]``:
+    how much higher the Sun stands at cell ``(r, c)`` of ``window`` than at the site origin
+    (the grid centre), ``u / R`` for a displacement ``u`` towards the Sun (the local
+    vertical tilts with the Moon's curvature)."""
+    nrows, ncols = shape
+    r0, c0, nr, nc = window
+    a = math.radians(az_deg)
+    x = (np.arange(c0, c0 + nc) + 0.5 - 0.5 * ncols) * res
+    y = (0.5 * nrows - np.arange(r0, r0 + nr) - 0.5) * res
+    return y * (math.cos(a) / moon_radius_m), x * (math.sin(a) / moon_radius_m)
+
+
+def _tilt_bound(shape, res: float, moon_radius_m: float) -> float:
+    """Largest |Sun tilt| over the grid (rad): half its diagonal over R."""
+    return 0.5 * math.hypot(shape[0], shape[1]) * res / moon_radius_m
+
+
 def _fraction_from_tan(
-    t: np.ndarray, tm, *, el_deg: float, radius: float, lut: np.ndarray
+    t: np.ndarray,
+    tm,
+    *,
+    el_deg: float,
+    radius: float,
+    lut: np.ndarray,
+    tilt=None,
+    tilt_bound: float = 0.0,
 ) -> np.ndarray:
-    """Lit fraction (float32) from the tangent of the local horizon ``t`` (NaN on nodata)
-    and of the outside horizon ``tm`` (scalar or array). Only exact arithmetic per pixel
-    (no ``atan``/``acos``: ``tan(h - e) = (t - T) / (1 + t T)`` equals ``h - e`` to 4e-8
-    rad inside the band, and the segment area comes from a uniform lookup table), so the
-    value of a cell never depends on the array it is computed in."""
+    """Lit fraction (float32) from the tangent ``t`` of each cell's horizon (its local
+    frame; NaN on nodata), the tangent ``tm`` of the outside horizon (scalar or array)
+    and the Sun's elevation at the site origin.
+
+    At a cell the Sun stands higher by ``delta`` = ``tilt`` (see :func:`_sun_tilt`; at
+    most ``tilt_bound``); so do distant outside horizons, so the mask is compared with
+    the Sun in the origin's frame: ``h - e`` at the cell is
+    ``max(atan t - e - delta, m - e)``. Only exact arithmetic touches a pixel (no
+    ``atan``/``acos``: ``tan(h - e) = (t - T) / (1 + t T)`` equals ``h - e`` to 4e-8 rad
+    in the band; the segment area comes from a uniform lookup table), so the value of a
+    cell never depends on the array it is computed in.
+    """
     e = math.radians(el_deg)
     T = math.tan(e)
-    lo, hi = math.tan(e - radius), math.tan(e + radius)
-    te = np.fmax(t, np.asarray(tm, dtype=np.float32))
-    frac = np.zeros(te.shape, dtype=np.float32)
-    frac[te <= lo] = 1.0
-    part = (te > lo) & (te < hi)
-    tp = te[part].astype(np.float64)
-    v = -((tp - T) / (1.0 + tp * T)) / radius  # Sun centre above the horizon, in radii
+    cap = math.pi / 2 - 1e-6
+
+    def tan_at(a: float) -> float:
+        return math.tan(min(cap, max(-cap, a)))
+
+    d = float(tilt_bound)
+    lit_t, dark_t = tan_at(e - radius - d), tan_at(e + radius + d)
+    lit_m, dark_m = tan_at(e - radius), tan_at(e + radius)
+    tm_arr = np.asarray(tm, dtype=np.float64)
+    surely_lit = (t <= lit_t) & (tm_arr <= lit_m)
+    surely_dark = (t >= dark_t) | (tm_arr >= dark_m)
+    frac = np.zeros(t.shape, dtype=np.float32)
+    frac[surely_lit] = 1.0
+    part = ~(surely_lit | surely_dark | np.isnan(t))
+    idx = np.nonzero(part)
+    tp = np.clip(t[idx].astype(np.float64), tan_at(e - 2 * radius - d), tan_at(e + 2 * radius + d))
+    y = (tp - T) / (1.0 + tp * T)  # h - e in the origin's frame
+    if tilt is not None:
+        y -= tilt[0][idx[0]] + tilt[1][idx[1]]  # h - e at the cell
+    tmp = tm_arr[idx] if tm_arr.ndim else tm_arr
+    tmp = np.clip(tmp, tan_at(e - 2 * radius), tan_at(e + 2 * radius))
+    y = np.fmax(y, (tmp - T) / (1.0 + tmp * T))
+    v = -y / radius  # Sun centre above the effective horizon, in radii
     u = np.clip((v + 1.0) * (0.5 * (_LUT_N - 1)), 0.0, _LUT_N - 1.0)
     i = np.minimum(u.astype(np.int64), _LUT_N - 2)
     f = u - i
-    frac[part] = (lut[i] + f * (lut[i + 1] - lut[i])).astype(np.float32)
+    frac[idx] = (lut[i] + f * (lut[i + 1] - lut[i])).astype(np.float32)
     frac[np.isnan(t)] = np.nan
     return frac
 
@@ -201,8 +257,9 @@ _LIGHTMAP_ARGS_DOC = """
         dem: a :class:`~lunar_drake.terrain.heightfield.Heightfield` (file-backed ones are
             read tile by tile) or a 2-D array of heights (m; row 0 north, NaN nodata).
         sun_azimuth_deg: Sun azimuth, deg clockwise from grid north (site frame).
-        sun_elevation_deg: elevation of the Sun's centre above the local horizontal
-            (deg), in [-89, 89].
+        sun_elevation_deg: elevation of the Sun's centre above the local horizontal at
+            the site origin (the grid centre), deg, in [-89, 89]; a cell ``u`` m towards
+            the Sun sees it ``u / R`` rad higher (lunar curvature).
         resolution_m: pixel size (m); required for arrays.
         horizon_mask: terrain outside the DEM; default a level horizon (0 deg), i.e. a
             plain. ``HorizonMask.none()`` lets only the DEM cast shadows.
@@ -274,7 +331,7 @@ def lightmap(
     return arr.compute(scheduler="threads", num_workers=int(workers))
 
 
-lightmap.__doc__ += _LIGHTMAP_ARGS_DOC
+lightmap.__doc__ += "\n" + _LIGHTMAP_ARGS_DOC
 
 
 def lightmap_dask(
@@ -314,15 +371,17 @@ def lightmap_dask(
             f"slopes_per_diameter = {slopes_per_diameter!r} is invalid; an integer >= 1"
         )
     e = math.radians(el)
-    t_lo, t_hi = math.tan(e - r), math.tan(e + r)
+    R = float(moon_radius_m)
+    dmax = _tilt_bound(shape, res, R) if math.isfinite(R) and R > 0 else 0.0
+    cap = math.pi / 2 - 1e-6
     plan = band_plan(
         shape,
         res,
         _height_range(src),
         azimuth_deg=az,
-        tan_lo=t_lo,
-        tan_hi=t_hi,
-        max_dtau=(t_hi - t_lo) / int(slopes_per_diameter),
+        tan_lo=math.tan(max(-cap, e - r - dmax)),  # the Sun's disk at every cell
+        tan_hi=math.tan(min(cap, e + r + dmax)),
+        max_dtau=(math.tan(e + r) - math.tan(e - r)) / int(slopes_per_diameter),
         near_steps=near_steps,
         near_interior_steps=near_interior_steps,
         max_shadow_length_m=max_shadow_length_m,
@@ -337,8 +396,10 @@ def lightmap_dask(
             z = np.asarray(read(r0, c0, r1 - r0, c1 - c0))
             return np.where(np.isnan(z), np.float32(np.nan), np.float32(0.0))
         t = plan.tile(read, r0, r1, c0, c1, workers=wk)
-        tm = mask.tan_on_grid(az, shape=shape, resolution_m=res, window=(r0, c0, r1 - r0, c1 - c0))
-        return _fraction_from_tan(t, tm, el_deg=el, radius=r, lut=lut)
+        win = (r0, c0, r1 - r0, c1 - c0)
+        tm = mask.tan_on_grid(az, shape=shape, resolution_m=res, window=win)
+        tilt = _sun_tilt(shape, res, az, win, R)
+        return _fraction_from_tan(t, tm, el_deg=el, radius=r, lut=lut, tilt=tilt, tilt_bound=dmax)
 
     return tiled_dask(
         tile, shape, tile_px=tile_px, workers=workers, progress=progress, desc="lightmap"
@@ -360,7 +421,9 @@ def lightmap_from_horizon(
     the Sun azimuth) or an array of horizon elevations (rad) along the Sun azimuth.
 
     The Sun's disk must lie inside the field's elevation range (its horizons are clipped
-    to it). ``resolution_m`` is needed only for a gridded ``horizon_mask``.
+    to it). With ``resolution_m`` (m) the Sun's elevation change across the grid
+    (distance towards the Sun / lunar radius) is applied as in :func:`lightmap`; without
+    it, it is ignored (a gridded ``horizon_mask`` needs it).
     """
     az, el = _check_sun(sun_azimuth_deg, sun_elevation_deg)
     r = _check_disk(sun_radius_deg, limb, limb_darkening_u)
@@ -378,14 +441,25 @@ def lightmap_from_horizon(
         h = np.asarray(horizon, dtype=np.float32)
         if h.ndim != 2:
             raise ConfigError(f"horizon has shape {h.shape}; a 2-D array (rad) is required")
-    if mask.gridded:
-        if resolution_m is None:
-            raise ConfigError("resolution_m is required with a gridded horizon_mask")
-        tm = mask.tan_on_grid(az, shape=h.shape, resolution_m=float(resolution_m))
-    else:
-        tm = mask.tan_on_grid(az, shape=h.shape, resolution_m=1.0)
+    tilt, bound = None, 0.0
+    if resolution_m is not None:
+        res = float(resolution_m)
+        if not (math.isfinite(res) and res > 0):
+            raise OutOfRangeError(f"resolution_m = {resolution_m!r} is invalid; must be > 0")
+        win = (0, 0, *h.shape)
+        tilt = _sun_tilt(h.shape, res, az, win, MOON_RADIUS_M)
+        bound = _tilt_bound(h.shape, res, MOON_RADIUS_M)
+    elif mask.gridded:
+        raise ConfigError("resolution_m is required with a gridded horizon_mask")
+    tm = mask.tan_on_grid(az, shape=h.shape, resolution_m=float(resolution_m or 1.0))
     return _fraction_from_tan(
-        np.tan(h), tm, el_deg=el, radius=r, lut=_fraction_lut(limb, float(limb_darkening_u))
+        np.tan(h),
+        tm,
+        el_deg=el,
+        radius=r,
+        lut=_fraction_lut(limb, float(limb_darkening_u)),
+        tilt=tilt,
+        tilt_bound=bound,
     )
 
 
@@ -497,7 +571,8 @@ def lightmap_bruteforce(
     cell by cell over the bilinear surface: between consecutive grid-line crossings the
     terrain along the ray is a quadratic, and so is its height above the ray (the ray
     rises by ``d tan(e) + d**2 / (2 R)``, R the lunar radius), so sampling the crossing
-    and the segment midpoint gives that segment's maximum exactly. A ray is blocked if
+    and the segment midpoint gives that segment's maximum exactly; the Sun's elevation is
+    the origin's plus ``u / R`` for a cell ``u`` m towards the Sun. A ray is blocked if
     the terrain rises above it anywhere -- including right at the start (self-shadowing
     by the cell's own slope) -- and free once it clears the DEM's maximum or leaves the
     DEM, where it must also clear ``horizon_mask`` (default a level horizon, 0 deg).
@@ -551,7 +626,10 @@ def lightmap_bruteforce(
     else:
         mask_el = np.array([float(mask.elevation_deg(math.degrees(a))) for a in az_k])[None, :]
     clear = e_k[None, :] > np.radians(mask_el)  # (cells or 1, rays)
-    tan_k = np.tan(e_k)
+    # The Sun stands higher by u / R at a cell u metres towards it from the grid centre.
+    ux = (cols + 0.5 - 0.5 * nc) * res
+    uy = (0.5 * nr - rows - 0.5) * res
+    tilt = (ux * math.sin(math.radians(az)) + uy * math.cos(math.radians(az))) / moon_radius_m
     drow, dcol = -np.cos(az_k), np.sin(az_k)  # per pixel of horizontal distance
     with np.errstate(divide="ignore"):
         inv_c = np.where(np.abs(dcol) > 1e-15, 1.0 / np.abs(dcol), np.inf)
@@ -560,10 +638,10 @@ def lightmap_bruteforce(
     z0 = zz[rows, cols]
     k2 = res * res / (2.0 * moon_radius_m)
 
-    def excess(s, r0, c0, h0, kk):
+    def excess(s, r0, c0, h0, kk, tk):
         """Terrain height above the rays at distance ``s`` px (NaN outside the grid)."""
         h = _bilinear(zz, r0 + drow[kk] * s, c0 + dcol[kk] * s)
-        return h - (h0 + s * res * tan_k[kk] + s * s * k2)
+        return h - (h0 + s * res * tk + s * s * k2)
 
     out = np.zeros(rows.size)
     n_k = dx.size
@@ -576,6 +654,7 @@ def lightmap_bruteforce(
         R0 = rows[s0:s1][ci].astype(np.float64)
         C0 = cols[s0:s1][ci].astype(np.float64)
         H0 = z0[s0:s1][ci]
+        TAN = np.tan(e_k[ki] + tilt[s0:s1][ci])  # ray slope at its cell
         vis = np.zeros(ci.size, dtype=bool)
         act = np.flatnonzero(~np.isnan(H0))
         # Distance (px) of the next column / row crossing of each ray, and the last point.
@@ -585,11 +664,11 @@ def lightmap_bruteforce(
         f_prev = np.zeros(ci.size)  # excess at s_prev (0 at the start)
         while act.size:
             kk = ki[act]
-            r0, c0, h0 = R0[act], C0[act], H0[act]
+            r0, c0, h0, tk = R0[act], C0[act], H0[act], TAN[act]
             sp = s_prev[act]
             sn = np.minimum(next_c[act], next_r[act])
-            fn = excess(sn, r0, c0, h0, kk)
-            fm = excess(0.5 * (sp + sn), r0, c0, h0, kk)
+            fn = excess(sn, r0, c0, h0, kk, tk)
+            fm = excess(0.5 * (sp + sn), r0, c0, h0, kk, tk)
             f0 = f_prev[act]
             inside = ~np.isnan(fn)
             # Quadratic through (0, f0), (1/2, fm), (1, fn): a l^2 + b l + f0.
@@ -601,7 +680,7 @@ def lightmap_bruteforce(
             # Leaving the grid mid-segment: judge the part inside by its midpoint only.
             seg_max = np.where(inside, np.fmax(np.fmax(fn, fv), fm), fm)
             blocked = seg_max > 0
-            ray_top = h0 + sn * res * tan_k[kk] + sn * sn * k2
+            ray_top = h0 + sn * res * tk + sn * sn * k2
             free = ~blocked & (~inside | (ray_top > zmax))
             ok = clear[s0 + ci[act], kk] if mask.gridded else clear[0, kk]
             vis[act[free & ok]] = True

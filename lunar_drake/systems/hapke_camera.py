@@ -212,7 +212,7 @@ class HapkeCamera(LeafSystem):
         if not gain > 0:
             raise OutOfRangeError(f"camera gain = {gain!r}; must be > 0")
         lightmap = self._optional(self.lightmap_input, context)
-        tracks = self._optional(self.track_depth_input, context)
+        tracks_in = self._optional(self.track_depth_input, context)
         illum, sun_up = self._r.illumination(
             sun_dir_W=sun,
             sun_distance_km=sun_d,
@@ -225,6 +225,7 @@ class HapkeCamera(LeafSystem):
         for mt in self._mounts:
             X_WC = poses[int(mt.body_index)].multiply(mt.X_BC)
             self._check_above_terrain(mt.name, X_WC.translation(), t)
+            tracks = self._track_sampler(tracks_in, X_WC.translation())
             shaded = self._r.shade(
                 X_WC=X_WC,
                 illumination=illum,
@@ -257,6 +258,21 @@ class HapkeCamera(LeafSystem):
                 index=index,
             )
         state.get_mutable_abstract_state(0).set_value(frames)
+
+    @staticmethod
+    def _track_sampler(tracks, p, half_m: float = 25.0):
+        """A RasterSampler of the wheel-track raster near the camera (grooves farther than
+        ``half_m`` are sub-pixel), or the callable itself if it is not a TrackRaster."""
+        if tracks is None or not hasattr(tracks, "window"):
+            return tracks
+        if tracks.tile_count == 0:
+            return None
+        from lunar_drake.render.shading import RasterSampler
+
+        values, bounds = tracks.window(
+            left=p[0] - half_m, bottom=p[1] - half_m, right=p[0] + half_m, top=p[1] + half_m
+        )
+        return RasterSampler(values, bounds=bounds, outside=0.0)
 
     def _check_above_terrain(self, name: str, p, t: float) -> None:
         hf = self._r.heightfield
