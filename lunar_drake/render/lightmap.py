@@ -18,7 +18,10 @@ a few slopes across the band, an exact near field for each cell's own ray, lunar
 curvature, tiles with a halo of the shadow reach, bit-identical whatever the tiling).
 Terrain outside the DEM enters through a :class:`HorizonMask`:
 ``h_eff = max(h_local, mask(azimuth))``; by default the surroundings are a level plain
-(horizon 0 deg), so a Sun below the horizon gives zeros.
+(horizon 0 deg), so a Sun below the horizon gives zeros. The Sun's azimuth and
+elevation are those at the site origin (the grid centre, grid-north azimuth); since the
+local vertical follows the Moon's curvature, a cell ``u`` m towards the Sun sees it
+``u / R`` higher (0.005 deg at 164 m), and so do distant outside horizons.
 
 Accuracy: against the brute-force reference (:func:`lightmap_bruteforce`, 280 rays per
 cell marched exactly over the bilinear surface) on rough fractal terrain under a
