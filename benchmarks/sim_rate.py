@@ -37,7 +37,7 @@ def main(argv=None) -> int:
     scenario = load_scenario(scenario_name=args.scenario)
     site = ensure_site(scenario, progress=False)
     hf, _ = load_site_layers(site)
-    diagram = MakeMissionDiagram(scenario=scenario, heightfield=hf)
+    diagram = MakeMissionDiagram(scenario=scenario, heightfield=hf, cameras=False)
     runs = []
     for _ in range(args.repeats):
         sim = Simulator(diagram)

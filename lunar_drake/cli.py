@@ -74,6 +74,8 @@ def _cmd_run(args) -> int:
         )
     files = ["scenario.yaml", "summary.json", "timing.json"]
     files += result.summary.get("rover", {}).get("logs", [])
+    if result.summary.get("camera_frames"):
+        files.append(f"frames/ ({result.summary['camera_frames']} stereo frames)")
     files += ["meshcat.html"] if meshcat is not None else []
     print(f"Outputs: {result.out_dir.resolve()} ({', '.join(files)})")
     if meshcat is not None:

@@ -251,9 +251,7 @@ class VtkReferenceCamera:
             raise ConfigError("VtkReferenceCamera.finalize() was already called")
         if not self.plant.is_finalized():
             self.plant.Finalize()
-        info = CameraInfo(
-            width=self.width, height=self.height, fov_y=math.radians(self.fov_y_deg)
-        )
+        info = CameraInfo(width=self.width, height=self.height, fov_y=math.radians(self.fov_y_deg))
         core = RenderCameraCore("vtk", info, ClippingRange(self._near, self._far), RigidTransform())
         self.sensor = self.builder.AddNamedSystem(
             "vtk_camera",
