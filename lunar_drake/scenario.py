@@ -143,6 +143,27 @@ class RoverConfig:
 
 
 @dc.dataclass
+class SpotlightConfig:
+    """A rover spotlight rigidly attached to a rover body (paper: up to four lights).
+
+    Attributes:
+        body: rover body name (e.g. chassis, mast_head).
+        xyz: lamp position in the body frame (m). direction: beam axis in the body frame.
+        intensity_W_per_sr: on-axis radiant intensity in the camera band (W/sr).
+        outer_half_angle_deg, inner_half_angle_deg: cone edge and full-intensity core.
+        cast_shadows: ray-cast the light's shadows (slower).
+    """
+
+    body: str = "chassis"
+    xyz: list[float] = dc.field(default_factory=lambda: [0.75, 0.0, 0.0])
+    direction: list[float] = dc.field(default_factory=lambda: [1.0, 0.0, -0.35])
+    intensity_W_per_sr: float = 20.0
+    outer_half_angle_deg: float = 35.0
+    inner_half_angle_deg: float = 20.0
+    cast_shadows: bool = False
+
+
+@dc.dataclass
 class CameraConfig:
     """The mast stereo pair (Hapke camera; DESIGN.md decision 3).
 
@@ -153,6 +174,7 @@ class CameraConfig:
         shadow_samples: rays toward the solar disk per rover-shadow penumbra pixel.
         lookahead_m: the gimbal points at the ground this far ahead of the rover (m).
         save_frames: write every frame into the run directory (frames/).
+        spotlights: up to 4 rover lights.
     """
 
     enabled: bool = True
@@ -165,6 +187,7 @@ class CameraConfig:
     shadow_samples: int = 8
     lookahead_m: float = 6.0
     save_frames: bool = True
+    spotlights: list[SpotlightConfig] = dc.field(default_factory=list)
 
 
 @dc.dataclass
@@ -368,9 +391,32 @@ def validate_scenario(s: Scenario) -> None:
     _check("camera.gain", c.gain, 0.0, 64.0, lo_open=True)
     _check("camera.shadow_samples", c.shadow_samples, 1, 64)
     _check("camera.lookahead_m", c.lookahead_m, 0.5, 1000.0, unit=" m")
+    if len(c.spotlights) > 4:
+        raise OutOfRangeError(f"camera.spotlights has {len(c.spotlights)} lights; at most 4")
+    for k, L in enumerate(c.spotlights):
+        if len(L.xyz) != 3 or len(L.direction) != 3:
+            raise ConfigError(f"camera.spotlights[{k}]: xyz and direction need 3 values")
+        _check(f"camera.spotlights[{k}].intensity_W_per_sr", L.intensity_W_per_sr, 0.0, 1e6)
+        _check(
+            f"camera.spotlights[{k}].outer_half_angle_deg",
+            L.outer_half_angle_deg,
+            0.0,
+            89.0,
+            lo_open=True,
+            unit=" deg",
+        )
+        _check(
+            f"camera.spotlights[{k}].inner_half_angle_deg",
+            L.inner_half_angle_deg,
+            0.0,
+            L.outer_half_angle_deg,
+            hi_open=True,
+            unit=" deg",
+        )
     li = s.lighting
-    _check("lighting.ephemeris_update_s", li.ephemeris_update_s, 0.0, 86400.0, lo_open=True,
-           unit=" s")
+    _check(
+        "lighting.ephemeris_update_s", li.ephemeris_update_s, 0.0, 86400.0, lo_open=True, unit=" s"
+    )
     _check("lighting.lightmap_interval_s", li.lightmap_interval_s, 60.0, 1.0e6, unit=" s")
     _check("lighting.lightmap_max_px", li.lightmap_max_px, 64, 16384, unit=" px")
     for k in li.extra_kernels:

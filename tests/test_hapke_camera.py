@@ -124,3 +124,28 @@ def test_camera_inside_the_terrain_is_an_error():
     with pytest.raises(SimulationError, match="inside the terrain"):
         cam._update(ctx, ctx.get_mutable_state())
     del state
+
+
+def test_rover_spotlights_from_the_scenario():
+    from lunar_drake.errors import ConfigError
+    from lunar_drake.scenario import load_scenario
+
+    s = load_scenario(scenario_name="night")
+    assert len(s.camera.spotlights) == 2 and s.camera.spotlights[0].body == "chassis"
+    five = "[" + ", ".join(["{body: chassis}"] * 5) + "]"
+    with pytest.raises(OutOfRangeError, match="at most 4"):
+        load_scenario(scenario_name="small", scenario_text=f"{{camera: {{spotlights: {five}}}}}")
+    with pytest.raises(ConfigError, match="inner_half_angle_deg"):
+        load_scenario(scenario_name="small", scenario_text=(
+            "{camera: {spotlights: [{outer_half_angle_deg: 20, inner_half_angle_deg: 30}]}}"))
+    # A lamp in the dark: its cone lights the ground below it, nothing outside.
+    from lunar_drake.render.shading import SpotLight
+
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    lamp = SpotLight(position_W=(0.0, 0.0, 2.0), direction_W=(0.0, 0.0, -1.0),
+                     intensity=0.05, outer_half_angle_rad=math.radians(10),
+                     inner_half_angle_rad=math.radians(5))
+    illum, up = r.illumination(sun_dir_W=(1.0, 0.0, -0.2), spotlights=[lamp])
+    img = r.shade(X_WC=_down_camera(height=3.0), illumination=illum).radiance
+    assert not up
+    assert img[24, 32] > 20 * img[2, 2]

@@ -229,9 +229,27 @@ def _add_cameras(
         CameraMount(name=n, body_index=f.body().index(), X_BC=f.GetFixedPoseInBodyFrame())
         for n, f in (("left", rover.left_camera), ("right", rover.right_camera))
     ]
+    from lunar_drake.render.shading import SpotLight
+
+    band = renderer.sensor.band_solar_irradiance_W_m2
+    lights = []
+    for L in c.spotlights:
+        body = plant.GetBodyByName(L.body, rover.model_instance)
+        tmpl = SpotLight(
+            position_W=(0.0, 0.0, 0.0),
+            direction_W=(1.0, 0.0, 0.0),
+            intensity=L.intensity_W_per_sr / band,
+            outer_half_angle_rad=math.radians(L.outer_half_angle_deg),
+            inner_half_angle_rad=math.radians(L.inner_half_angle_deg),
+            cast_shadows=L.cast_shadows,
+        )
+        lights.append(
+            (body.index(), np.asarray(L.xyz, float), np.asarray(L.direction, float), tmpl)
+        )
     cam = builder.AddNamedSystem(
         "camera",
         HapkeCamera(
+            lights=lights,
             renderer=renderer,
             mounts=mounts,
             rover_geometry=geometry,

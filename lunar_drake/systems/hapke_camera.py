@@ -99,6 +99,8 @@ class HapkeCamera(LeafSystem):
         mounts: CameraMount list (e.g. left and right of a stereo pair).
         rover_geometry: (GeometryId, DynamicMesh) pairs drawn and shadowed from
             SceneGraph poses. rate_hz: frame rate. seed, name: noise stream.
+        lights: up to 4 (BodyIndex, p_BL, d_BL, SpotLight template) lamps carried by plant
+            bodies; the template's position/direction are replaced each frame.
     """
 
     def __init__(
@@ -110,6 +112,7 @@ class HapkeCamera(LeafSystem):
         rate_hz: float = 1.0,
         seed: int = 0,
         name: str = "camera",
+        lights=(),
     ):
         super().__init__()
         if not 0 < rate_hz <= 100:
@@ -117,6 +120,7 @@ class HapkeCamera(LeafSystem):
         self._r = renderer
         self._mounts = list(mounts)
         self._gids = [g for g, _ in rover_geometry]
+        self._lights = list(lights)
         self._rate = float(rate_hz)
         self._keys = {m.name: rng.stream_key(seed, f"{name}/{m.name}") for m in self._mounts}
         m = renderer.model
