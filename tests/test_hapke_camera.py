@@ -32,8 +32,9 @@ def test_flat_plane_matches_closed_form_hapke():
     centre = float(img.radiance[24, 32])
     # Sun and the 3 % fill (opposite azimuth, same elevation) both see cos_i = sin(30),
     # cos_e = 1 and phase 60 deg at the nadir pixel: I/F = pi * 1.03 * r.
-    refl = float(hapke_reflectance(0.5, 1.0, math.radians(60.0), params=HIGHLANDS_643NM,
-                                   dtype=np.float64))
+    refl = float(
+        hapke_reflectance(0.5, 1.0, math.radians(60.0), params=HIGHLANDS_643NM, dtype=np.float64)
+    )
     assert centre == pytest.approx(math.pi * 1.03 * refl, rel=1e-4)
     assert img.label[24, 32] == 1
     assert float(img.depth[24, 32]) == pytest.approx(3.0, rel=1e-5)
@@ -58,15 +59,23 @@ def test_sensor_frames_are_bit_identical_and_exposure_checked():
 def test_sun_below_horizon_is_dark_but_not_black():
     r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
     day, _ = r.illumination(sun_dir_W=(0.9, 0.0, 0.2))
-    night, up = r.illumination(sun_dir_W=(0.99, 0.0, -0.05), earth_dir_W=(0.0, 0.9, 0.4),
-                               earth_distance_km=384_400.0, earth_phase=0.8)
+    night, up = r.illumination(
+        sun_dir_W=(0.99, 0.0, -0.05),
+        earth_dir_W=(0.0, 0.9, 0.4),
+        earth_distance_km=384_400.0,
+        earth_phase=0.8,
+    )
     assert not up
     lit = r.shade(X_WC=_down_camera(), illumination=day).radiance
     dark = r.shade(X_WC=_down_camera(), illumination=night).radiance
     assert 0 < dark.mean() < 0.05 * lit.mean()
     # Earthshine alone is tiny but present.
-    only_earth, _ = r.illumination(sun_dir_W=(0.99, 0.0, -0.05), earth_dir_W=(0.0, 0.9, 0.4),
-                                   earth_distance_km=384_400.0, earth_phase=0.8)
+    only_earth, _ = r.illumination(
+        sun_dir_W=(0.99, 0.0, -0.05),
+        earth_dir_W=(0.0, 0.9, 0.4),
+        earth_distance_km=384_400.0,
+        earth_phase=0.8,
+    )
     assert only_earth.earth_irradiance > 0
 
 
@@ -79,8 +88,9 @@ def test_mission_stereo_pair_renders_terrain_and_is_deterministic(tmp_path, monk
     from lunar_drake.site import ensure_site
 
     monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
-    s = load_scenario(scenario_name="small",
-                      scenario_text="{camera: {width: 96, height: 72, rate_hz: 1.0}}")
+    s = load_scenario(
+        scenario_name="small", scenario_text="{camera: {width: 96, height: 72, rate_hz: 1.0}}"
+    )
     hf, alb = load_site_layers(ensure_site(s, progress=False))
     frames = []
     for _ in range(2):
@@ -136,15 +146,24 @@ def test_rover_spotlights_from_the_scenario():
     with pytest.raises(OutOfRangeError, match="at most 4"):
         load_scenario(scenario_name="small", scenario_text=f"{{camera: {{spotlights: {five}}}}}")
     with pytest.raises(ConfigError, match="inner_half_angle_deg"):
-        load_scenario(scenario_name="small", scenario_text=(
-            "{camera: {spotlights: [{outer_half_angle_deg: 20, inner_half_angle_deg: 30}]}}"))
+        load_scenario(
+            scenario_name="small",
+            scenario_text=(
+                "{camera: {spotlights: [{outer_half_angle_deg: 20, inner_half_angle_deg: 30}]}}"
+            ),
+        )
     # A lamp in the dark: its cone lights the ground below it, nothing outside.
     from lunar_drake.render.shading import SpotLight
 
     r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
-    lamp = SpotLight(position_W=(0.0, 0.0, 2.0), direction_W=(0.0, 0.0, -1.0),
-                     intensity=0.05, outer_half_angle_rad=math.radians(10),
-                     inner_half_angle_rad=math.radians(5))
+    lamp = SpotLight(
+        position_W=(0.0, 0.0, 2.0),
+        direction_W=(0.0, 0.0, -1.0),
+        up_W=(1, 0, 0),
+        intensity=0.05,
+        outer_half_angle_rad=math.radians(10),
+        inner_half_angle_rad=math.radians(5),
+    )
     illum, up = r.illumination(sun_dir_W=(1.0, 0.0, -0.2), spotlights=[lamp])
     img = r.shade(X_WC=_down_camera(height=3.0), illumination=illum).radiance
     assert not up
