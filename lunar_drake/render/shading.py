@@ -738,6 +738,7 @@ def shade(
     lightmap: Field2D | RasterSampler | None = None,
     track_depth: Field2D | RasterSampler | None = None,
     config: ShadingConfig = ShadingConfig(),
+    secondary_brdf: BRDF | None = None,
 ) -> ShadedImage:
     """Shade a G-buffer (see the module docstring for the model and units).
 
@@ -754,6 +755,8 @@ def shade(
         track_depth: wheel-track groove depth ``(x, y) -> m`` (positive down) for bump
             normals; None = no bump.
         config: :class:`ShadingConfig`.
+        secondary_brdf: a cheaper BRDF for the indirect fill and Earthshine (both weak,
+            broad sources); None = ``brdf``.
     """
     gb = gbuffer
     m = gb.index.size
@@ -782,11 +785,11 @@ def shade(
     if dyn_idx.size:
         lam = raycaster.dynamic_albedo(gb.hits)[gb.index] * np.float32(1.0 / math.pi)
 
-    def radiance_term(cos_i, cos_g, sel=None):
+    def radiance_term(cos_i, cos_g, sel=None, fn=None):
         """f_r * cos_i for one light at pixels ``sel`` (all when None); cos_i >= 0."""
         ce = cos_e if sel is None else cos_e[sel]
         np.clip(cos_g, -1.0, 1.0, out=cos_g)
-        f = np.asarray(brdf(cos_i, ce, np.arccos(cos_g)), dtype=np.float32)
+        f = np.asarray((fn or brdf)(cos_i, ce, np.arccos(cos_g)), dtype=np.float32)
         if f.shape != cos_i.shape or not f.flags.writeable:
             f = np.array(np.broadcast_to(f, cos_i.shape), dtype=np.float32)
         if afac is not None:
@@ -834,11 +837,13 @@ def shade(
 
     if il.fill_fraction > 0.0 and il.sun_irradiance > 0.0:
         fdir = fill_direction(il.sun_direction_W, il.fill_elevation_rad).astype(np.float32)
-        _add_directional(total, n, v, fdir, il.fill_fraction * il.sun_irradiance, radiance_term)
+        _add_directional(
+            total, n, v, fdir, il.fill_fraction * il.sun_irradiance, radiance_term, secondary_brdf
+        )
 
     if il.earth_direction_W is not None and il.earth_irradiance > 0.0:
         edir = np.asarray(il.earth_direction_W, dtype=np.float32)
-        _add_directional(total, n, v, edir, il.earth_irradiance, radiance_term)
+        _add_directional(total, n, v, edir, il.earth_irradiance, radiance_term, secondary_brdf)
 
     for spot in il.spotlights:
         _add_spot(total, gb, n, v, spot, radiance_term, raycaster, config)
@@ -848,12 +853,12 @@ def shade(
     return ShadedImage(rad.reshape(gb.height, gb.width), gb.depth, gb.label)
 
 
-def _add_directional(total, n, v, ldir, irradiance: float, radiance_term) -> None:
+def _add_directional(total, n, v, ldir, irradiance: float, radiance_term, fn=None) -> None:
     cos_i = _dot3(n, ldir)
     if not (cos_i > 0).any():
         return
     np.maximum(cos_i, np.float32(0.0), out=cos_i)
-    term = radiance_term(cos_i, _dot3(v, ldir))
+    term = radiance_term(cos_i, _dot3(v, ldir), None, fn)
     term *= np.float32(irradiance)
     total += term
 
