@@ -43,3 +43,19 @@ class OutOfBoundsError(LunarDrakeError, ValueError):
 
 class SimulationError(LunarDrakeError, RuntimeError):
     """A simulation could not be built or ran into an unrecoverable state."""
+
+
+def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit="") -> None:
+    """Raises OutOfRangeError naming ``name`` and ``value`` unless lo <= value <= hi
+    (strict at an ``_open`` end); NaN is always out of range."""
+    bad = (
+        value != value
+        or (value <= lo if lo_open else value < lo)
+        or (value >= hi if hi_open else value > hi)
+    )
+    if bad:
+        lb = "(" if lo_open else "["
+        rb = ")" if hi_open else "]"
+        raise OutOfRangeError(
+            f"{name} = {value!r} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
+        )

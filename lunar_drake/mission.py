@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lunar_drake.diagrams.rover import BodyPoseVector
 from lunar_drake.errors import SimulationError
 from lunar_drake.scenario import Scenario, dump_scenario
 from lunar_drake.site import Site, ensure_site
@@ -206,20 +207,7 @@ def run_mission(
 
 
 _LOG_COLUMNS = {
-    "rover.pose": (
-        "x_m",
-        "y_m",
-        "z_m",
-        "roll_rad",
-        "pitch_rad",
-        "yaw_rad",
-        "vx_mps",
-        "vy_mps",
-        "vz_mps",
-        "wx_radps",
-        "wy_radps",
-        "wz_radps",
-    ),
+    "rover.pose": BodyPoseVector.FIELDS,
     "rover.imu": (
         "gyro_x_radps",
         "gyro_y_radps",

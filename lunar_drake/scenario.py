@@ -22,7 +22,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
-from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError, check_range
 from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 
 SFD_LAWS = ("trask", "viper", "powerlaw")
@@ -306,18 +306,7 @@ def dump_scenario(scenario: Scenario) -> str:
     return yaml_dump_typed(scenario)
 
 
-def _check(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit="") -> None:
-    bad = (
-        value != value
-        or (value <= lo if lo_open else value < lo)
-        or (value >= hi if hi_open else value > hi)
-    )
-    if bad:
-        lb = "(" if lo_open else "["
-        rb = ")" if hi_open else "]"
-        raise OutOfRangeError(
-            f"{name} = {value!r} is out of range; allowed {lb}{lo}, {hi}{rb}{unit}"
-        )
+_check = check_range
 
 
 def _is_power_of_two(n: int) -> bool:

@@ -27,7 +27,7 @@ import math
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
 
-from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError, check_range
 
 STEERING_KINDS = ("skid", "explicit")
 """Allowed values of :attr:`RoverDescription.steering`."""
@@ -281,18 +281,7 @@ class RoverDescription:
         return np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), math.cos(t)])
 
 
-def _check(name, value, lo, hi, *, lo_open=False, hi_open=False, unit=""):
-    bad = (
-        value != value
-        or (value <= lo if lo_open else value < lo)
-        or (value >= hi if hi_open else value > hi)
-    )
-    if bad:
-        lb = "(" if lo_open else "["
-        rb = ")" if hi_open else "]"
-        raise OutOfRangeError(
-            f"{name} = {value!r} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
-        )
+_check = check_range
 
 
 # --------------------------------------------------------------------------------------

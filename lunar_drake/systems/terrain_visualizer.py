@@ -105,6 +105,10 @@ class TerrainVisualizer(LeafSystem):
         m.SetProperty("/Background", "top_color", [0.0, 0.0, 0.0])
         m.SetProperty("/Background", "bottom_color", [0.02, 0.02, 0.03])
         m.SetProperty("/Lights/AmbientLight/<object>", "intensity", 0.25)
+        # Meshcat's camera-side point lights would add a bright spot; the Sun (MeshcatSun)
+        # and the ambient term light the scene instead.
+        for light in ("PointLightNegativeX", "PointLightPositiveX"):
+            m.SetProperty(f"/Lights/{light}/<object>", "intensity", 0.0)
         b = hf.bounds
         half = 0.5 * max(b.right - b.left, b.top - b.bottom)
         z0 = float(np.nanmean(hf.decimated(max_size=16)[0]))
