@@ -406,15 +406,25 @@ def plot_slip(rows, *, path) -> Path:
         hi = np.array([r["max"] for r in ss]) * 100
         ref = np.array([r["reference"] for r in ss]) * 100
         color = f"C{k}"
+        climb = m <= 100.0
         ax.errorbar(
-            x,
-            m,
-            yerr=[m - lo, hi - m],
+            x[climb],
+            m[climb],
+            yerr=[np.maximum(m - lo, 0)[climb], np.maximum(hi - m, 0)[climb]],
             fmt="o",
             color=color,
             capsize=3,
             label=f"{rover}: simulated (mean, min-max over seeds)",
         )
+        if (~climb).any():  # spun out and slid back (slip > 100 %): drawn at the top
+            ax.plot(
+                x[~climb],
+                np.full((~climb).sum(), 100.0),
+                "x",
+                color=color,
+                ms=9,
+                label=f"{rover}: simulated, slides back (slip > 100 %)",
+            )
         ax.plot(x, ref, "--", color=color, label=f"{rover}: terramechanics reference")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("slip (%)")
