@@ -74,6 +74,12 @@ def test_cli_run_is_deterministic(cache, tmp_path, capsys):
     assert "cached" in capsys.readouterr().out
     a = (tmp_path / "a" / "summary.json").read_bytes()
     assert a == (tmp_path / "b" / "summary.json").read_bytes()
+    for log in ("truth.csv", "imu.csv", "wheels.csv", "encoders.csv", "star_tracker.csv"):
+        assert (tmp_path / "a" / log).read_bytes() == (tmp_path / "b" / log).read_bytes(), log
+    frames = sorted((tmp_path / "a" / "frames").iterdir())
+    assert frames
+    for f in frames:
+        assert f.read_bytes() == (tmp_path / "b" / "frames" / f.name).read_bytes(), f.name
     summary = json.loads(a)
     assert summary["simulated_s"] == pytest.approx(0.2)
     assert summary["site"]["shape_px"] == [256, 256]
