@@ -16,5 +16,7 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     nb = json.loads(path.read_text())
     src = "\n".join("".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "code")
     # IPython display is not available under pytest; show file names instead.
-    src = src.replace("from IPython.display import Image\n", "def Image(filename): return filename\n")
+    src = src.replace(
+        "from IPython.display import Image\n", "def Image(filename): return filename\n"
+    )
     exec(compile(src, str(path), "exec"), {"__name__": "__notebook__"})
