@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import json
+import math
 import os
 import re
 import time
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from lunar_drake.diagrams.rover import BodyPoseVector
-from lunar_drake.errors import SimulationError
+from lunar_drake.errors import LunarDrakeError, SimulationError
 from lunar_drake.scenario import Scenario, dump_scenario
 from lunar_drake.site import Site, ensure_site
 
@@ -78,8 +79,13 @@ def run_mission(
 
     from lunar_drake.diagrams.mission import ROVER_PORTS, MakeMissionDiagram
 
+    if duration is not None and not (math.isfinite(duration) and 0 <= duration <= 1e7):
+        from lunar_drake.errors import OutOfRangeError
+
+        raise OutOfRangeError(f"duration = {duration!r} s; allowed [0, 1e7] s")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    _clear_previous_outputs(out_dir)
     t0 = time.perf_counter()
     site = ensure_site(scenario, cache_dir=cache_dir, progress=progress)
     t_site = time.perf_counter()
@@ -163,7 +169,10 @@ def run_mission(
 
     b = heightfield.bounds
     x0, x1, y0, y1 = b.left, b.right, b.bottom, b.top
-    zc = float(heightfield.height(np.array([0.0]), np.array([0.0]))[0])
+    try:
+        zc = float(heightfield.height(np.array([0.0]), np.array([0.0]))[0])
+    except LunarDrakeError:
+        zc = None
     summary = {
         "scenario": scenario_name,
         "random_seed": scenario.random_seed,
@@ -189,7 +198,7 @@ def run_mission(
         root = simulator.get_context()
         summary["rover"] = _write_rover_logs(out_dir, loggers, root, scenario)
     if writer is not None:
-        summary["camera_frames"] = len(writer.written)
+        summary["camera_frames"] = len(writer.frames_written)
     timing = {
         "site_s": t_site - t0,
         "site_cached": site.cached,
@@ -270,3 +279,14 @@ def _write_rover_logs(out_dir: Path, loggers, root, scenario) -> dict:
         "energy_J": round(float(logs["rover.energy"][1][0, -1]), 4),
         "logs": sorted(_LOG_FILES.values()),
     }
+
+
+def _clear_previous_outputs(out_dir: Path) -> None:
+    """Removes the files an earlier run wrote into ``out_dir`` (only those), so a shorter
+    or camera-less rerun does not leave stale frames or logs next to its summary."""
+    import shutil
+
+    names = ["scenario.yaml", "summary.json", "timing.json", "meshcat.html", *_LOG_FILES.values()]
+    for n in names:
+        (out_dir / n).unlink(missing_ok=True)
+    shutil.rmtree(out_dir / "frames", ignore_errors=True)

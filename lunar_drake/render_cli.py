@@ -33,13 +33,13 @@ def render_stereo(*, scenario, time_s: float = 0.0, out_dir, progress: bool = Tr
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     hf, albedo = load_site_layers(ensure_site(scenario, progress=progress))
-    diagram = MakeMissionDiagram(
-        scenario=scenario, heightfield=hf, albedo=albedo, duration_s=max(time_s, 1.0)
-    )
-    sim = Simulator(diagram)
     # The camera renders on its period; land exactly on a frame at or after time_s.
     period = 1.0 / c.rate_hz
-    t_frame = np.ceil(time_s / period - 1e-9) * period
+    t_frame = float(np.ceil(time_s / period - 1e-9) * period)
+    diagram = MakeMissionDiagram(
+        scenario=scenario, heightfield=hf, albedo=albedo, duration_s=max(t_frame, 1.0) + period
+    )
+    sim = Simulator(diagram)
     sim.AdvanceTo(t_frame + 1e-6)
     root = sim.get_context()
     cam = diagram.GetSubsystemByName("camera")

@@ -12,6 +12,7 @@ Modelled on Drake's ``examples/hardware_sim/hardware_sim.py``.
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
 
 import dataclasses as dc
+import datetime
 import math
 import re
 from importlib import resources
@@ -353,6 +354,13 @@ def validate_scenario(s: Scenario) -> None:
         unit=" s",
     )
     _check("plant_config.time_step", s.plant_config.time_step, 0.0, 1.0, unit=" s")
+    try:
+        datetime.datetime.fromisoformat(s.site.epoch_utc)
+    except ValueError as exc:
+        raise ConfigError(
+            f"site.epoch_utc = {s.site.epoch_utc!r} is not an ISO 8601 UTC time "
+            "(e.g. 2027-11-15T00:00:00)"
+        ) from exc
     r = s.rover
     try:
         r.description.validate()
@@ -366,6 +374,8 @@ def validate_scenario(s: Scenario) -> None:
         )
     _check("rover.spawn_yaw_deg", r.spawn_yaw_deg, -360.0, 360.0, unit=" deg")
     _check("rover.log_period_s", r.log_period_s, 0.0, 100.0, lo_open=True, unit=" s")
+    if r.description.steering == "skid" and any(seg.vy_mps for seg in r.route):
+        raise ConfigError("rover.route has vy_mps != 0, which a skid-steer rover cannot do")
     for k, seg in enumerate(r.route):
         _check(f"rover.route[{k}].duration_s", seg.duration_s, 0.0, 1.0e6, unit=" s")
         _check(f"rover.route[{k}].vx_mps", seg.vx_mps, -5.0, 5.0, unit=" m/s")

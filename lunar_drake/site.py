@@ -92,8 +92,17 @@ def ensure_site(
     shutil.rmtree(tmp, ignore_errors=True)
     try:
         synthesize_site(config=config, out_dir=tmp, progress=progress)
-        shutil.rmtree(entry, ignore_errors=True)
-        os.replace(tmp, entry)
+        # A stale, incomplete entry (an older crash) is moved aside, never a complete one.
+        if entry.exists() and not all((entry / f).exists() for f in OUTPUT_FILES):
+            stale = entry.parent / f".{entry.name}.stale-{os.getpid()}"
+            os.rename(entry, stale)
+            shutil.rmtree(stale, ignore_errors=True)
+        try:
+            os.rename(tmp, entry)
+        except OSError:
+            # Another process finished the same site first: use theirs (same bytes).
+            if not all((entry / f).exists() for f in OUTPUT_FILES):
+                raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return Site(

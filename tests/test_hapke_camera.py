@@ -168,3 +168,53 @@ def test_rover_spotlights_from_the_scenario():
     img = r.shade(X_WC=_down_camera(height=3.0), illumination=illum).radiance
     assert not up
     assert img[24, 32] > 20 * img[2, 2]
+
+
+def test_mission_lamps_light_the_night_and_gimbal_looks_down(tmp_path, monkeypatch):
+    from pydrake.systems.analysis import Simulator
+
+    from lunar_drake.diagrams.mission import MakeMissionDiagram
+    from lunar_drake.errors import ConfigError
+    from lunar_drake.mission import load_site_layers
+    from lunar_drake.scenario import load_scenario
+    from lunar_drake.site import ensure_site
+
+    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    base = (
+        "{site: {epoch_utc: '2027-11-25T00:00:00'}, camera: {width: 64, height: 48, "
+        "rate_hz: 1.0, exposure_s: 0.05, gain: 4.0"
+    )
+    means = []
+    for lamps in ("", ", spotlights: [{body: chassis, intensity_W_per_sr: 200.0}]"):
+        s = load_scenario(scenario_name="small", scenario_text=base + lamps + "}}")
+        hf, alb = load_site_layers(ensure_site(s, progress=False))
+        d = MakeMissionDiagram(scenario=s, heightfield=hf, albedo=alb, duration_s=2.0)
+        sim = Simulator(d)
+        sim.AdvanceTo(1.5)
+        cam = d.GetSubsystemByName("camera")
+        f = cam.frame(cam.GetMyContextFromRoot(sim.get_context()), "left")
+        means.append(float(f.raw.mean()))
+        # The gimbal points the pair at the ground ahead: mostly terrain in view.
+        assert (f.label == 1).mean() > 0.5
+    assert means[1] > 2.0 * means[0] + 1.0
+    bad = load_scenario(
+        scenario_name="small", scenario_text="{camera: {spotlights: [{body: bumper}]}}"
+    )
+    with pytest.raises(ConfigError, match="bumper"):
+        MakeMissionDiagram(scenario=bad, heightfield=hf, albedo=alb, duration_s=2.0)
+
+
+def test_render_command_at_any_time(tmp_path, monkeypatch):
+    from lunar_drake.render_cli import render_stereo
+    from lunar_drake.scenario import load_scenario
+
+    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    s = load_scenario(
+        scenario_name="small", scenario_text="{camera: {width: 48, height: 32, rate_hz: 0.2}}"
+    )
+    paths = render_stereo(scenario=s, time_s=3.0, out_dir=tmp_path / "r", progress=False)
+    names = {p.name for p in paths}
+    assert {"left.png", "right.png", "left_preview.png", "render.json"} <= names
+    import json
+
+    assert json.loads((tmp_path / "r" / "render.json").read_text())["time_s"] == 5.0

@@ -211,5 +211,5 @@ def test_default_rover_drives_100_m_over_the_default_site(cache, tmp_path):
     ground = hf.height(truth[:, 1], truth[:, 2])
     clearance = truth[:, 3] - ground
     # The chassis centre stays above the terrain by about its nominal height.
-    assert clearance.min() > 0.25 and clearance.max() < 0.7
+    assert clearance.min() > 0.25 and clearance.max() < 1.0  # never airborne
     assert np.abs(truth[:, 7:10]).max() < 1.0  # no blow-up (m/s)

@@ -72,8 +72,8 @@ def test_footprint_geometry_flat_slope_and_rock():
 
 
 def _contact_forces(hf, *, p, v, w_spin):
-    """Evaluates WheelRegolithContact for one wheel (body 1) whose parent is body 0."""
-    sys = WheelRegolithContact(wheel_bodies=[1], wheel_parents=[0], wheel=WHEEL, soil=SOIL)
+    """Evaluates WheelRegolithContact for one wheel (body 1)."""
+    sys = WheelRegolithContact(wheel_bodies=[1], wheel=WHEEL, soil=SOIL)
     ctx = sys.CreateDefaultContext()
     sys.body_poses_input.FixValue(ctx, [RigidTransform(), RigidTransform(p)])
     sys.body_spatial_velocities_input.FixValue(
@@ -305,3 +305,22 @@ def test_slip_study_matches_reference_and_is_deterministic(tmp_path):
         progress=False,
     )
     assert (tmp_path / "again" / "slip.csv").read_bytes() == first
+
+
+def test_rolling_wheel_has_no_slip():
+    hf = _plane()
+    v = 0.1
+    # Pure rolling: hub speed v, absolute spin v / R about the axle.
+    _, st = _contact_forces(hf, p=[0, 0, R - 0.012], v=[v, 0, 0], w_spin=v / R)
+    assert st["slip"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_scenario_rejects_bad_epoch_and_skid_sideways_route():
+    from lunar_drake.scenario import load_scenario
+
+    with pytest.raises(ConfigError, match="epoch_utc"):
+        load_scenario(scenario_name="small", scenario_text="{site: {epoch_utc: yesterday}}")
+    with pytest.raises(ConfigError, match="skid-steer"):
+        load_scenario(
+            scenario_name="skid", scenario_text="{rover: {route: [{duration_s: 1, vy_mps: 0.1}]}}"
+        )

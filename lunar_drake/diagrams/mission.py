@@ -15,15 +15,17 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, SharedPointerSystem
+from pydrake.systems.primitives import SharedPointerSystem
 from pydrake.visualization import ApplyVisualizationConfig
 
 from lunar_drake.diagrams.rover import add_rover_model, check_soil_name, spawn_pose, wire_rover
 from lunar_drake.ephemeris.sun_earth import SiteLocation
+from lunar_drake.errors import ConfigError
 from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.energy_meter import EnergyMeter
 from lunar_drake.systems.ephemeris_source import EphemerisSource
+from lunar_drake.systems.gimbal_pointing import GimbalPointing
 from lunar_drake.systems.meshcat_sun import MeshcatSun
 from lunar_drake.systems.rover_kinematics import TwistSchedule
 from lunar_drake.systems.terrain_source import TerrainSource
@@ -122,8 +124,21 @@ def MakeMissionDiagram(
             ),
         )
         builder.Connect(route.twist_output, h.kinematics.twist_input)
-        gimbal = builder.AddNamedSystem("rover.gimbal_command", ConstantVectorSource(np.zeros(2)))
-        builder.Connect(gimbal.get_output_port(), h.kinematics.gimbal_input)
+        d = rover.description
+        pan_pos = rover.gimbal_pan.frame_on_parent().GetFixedPoseInBodyFrame().translation()
+        gimbal = builder.AddNamedSystem(
+            "rover.gimbal_pointing",
+            GimbalPointing(
+                chassis_index=rover.chassis.index(),
+                p_CG=pan_pos,
+                ground_below_m=rover.nominal_chassis_height_m,
+                lookahead_m=scenario.camera.lookahead_m,
+                pan_limits=(d.gimbal_pan_min_rad, d.gimbal_pan_max_rad),
+                tilt_limits=(d.gimbal_tilt_min_rad, d.gimbal_tilt_max_rad),
+            ),
+        )
+        builder.Connect(plant.get_body_poses_output_port(), gimbal.body_poses_input)
+        builder.Connect(gimbal.gimbal_command_output, h.kinematics.gimbal_input)
         drive_act = [
             plant.get_joint_actuator(a).input_start()
             for a in [act.index() for act in rover.drive_actuators]
@@ -233,7 +248,15 @@ def _add_cameras(
 
     band = renderer.sensor.band_solar_irradiance_W_m2
     lights = []
-    for L in c.spotlights:
+    for k, L in enumerate(c.spotlights):
+        if not plant.HasBodyNamed(L.body, rover.model_instance):
+            names = sorted(
+                plant.get_body(b).name() for b in plant.GetBodyIndices(rover.model_instance)
+            )
+            raise ConfigError(
+                f"camera.spotlights[{k}].body = {L.body!r} is not a rover body; choose one "
+                f"of {names}"
+            )
         body = plant.GetBodyByName(L.body, rover.model_instance)
         tmpl = SpotLight(
             position_W=(0.0, 0.0, 0.0),

@@ -112,15 +112,10 @@ def wire_rover(
     """
     d = rover.description
     wheel = tm.WheelParams(radius_m=d.wheel_radius_m, width_m=d.wheel_width_m)
-    parents = [
-        plant.GetJointByName(j.name(), rover.model_instance).parent_body().index()
-        for j in rover.drive_joints
-    ]
     contact = builder.AddNamedSystem(
         f"{name}.contact",
         WheelRegolithContact(
             wheel_bodies=[b.index() for b in rover.wheels],
-            wheel_parents=parents,
             wheel=wheel,
             soil=soil,
             belly_body=rover.chassis.index(),

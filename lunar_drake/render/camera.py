@@ -278,13 +278,14 @@ class TerrainCameraRenderer:
         gain: float,
         key: int,
         frame_index: int,
-        sun_distance_km: float = AU_KM,
     ) -> np.ndarray:
-        """The sensor's raw uint16 frame (12-bit codes) from a shaded image."""
+        """The sensor's raw uint16 frame (12-bit codes) from a shaded image.
+
+        The shaded image is already in units of the solar irradiance at 1 au (the Sun's
+        distance is applied in :meth:`illumination`), so it converts at 1 au here.
+        """
         L = sensor_mod.radiance_from_i_over_f(
-            np.maximum(shaded.radiance, 0.0),
-            params=self.sensor,
-            sun_distance_au=float(sun_distance_km) / AU_KM,
+            np.maximum(shaded.radiance, 0.0), params=self.sensor, sun_distance_au=1.0
         )
         return sensor_mod.expose(
             L,

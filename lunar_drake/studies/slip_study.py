@@ -38,6 +38,11 @@ from lunar_drake import rng
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.errors import ConfigError, OutOfRangeError
 
+RAMP_START_M = 8.0
+"""Distance (m) from the ramp's downslope edge to the spawn point."""
+SLIDE_BACK_STOP_M = 2.0
+"""A run stops once the rover has slid this far (m) back down the ramp."""
+
 ROVER_CHOICES = {"skid": "husky_rp", "explicit": "krex2_rp"}
 CSV_COLUMNS = (
     "rover",
@@ -50,6 +55,7 @@ CSV_COLUMNS = (
     "energy_J",
     "distance_m",
     "time_s",
+    "stop",
 )
 
 
@@ -92,10 +98,11 @@ def _description(rover: str):
 def ramp_heightfield(
     *, slope_deg: float, length_m: float, width_m: float = 8.0, resolution_m: float = 0.05
 ):
-    """A planar ramp z = (x - x0) tan(slope) whose base is 3 m inside the west edge."""
+    """A planar ramp z = x tan(slope) (site frame), ``length_m`` + 14 m long: the rover
+    starts :data:`RAMP_START_M` inside the west (downslope) edge."""
     from lunar_drake.terrain.heightfield import Heightfield
 
-    nc = math.ceil((length_m + 8.0) / resolution_m)
+    nc = math.ceil((length_m + RAMP_START_M + 6.0) / resolution_m)
     nr = math.ceil(width_m / resolution_m)
     x = (np.arange(nc) + 0.5 - 0.5 * nc) * resolution_m
     z = np.tile((x * math.tan(math.radians(slope_deg))).astype(np.float32), (nr, 1))
@@ -172,7 +179,7 @@ def run_slip_case(case: SlipCase) -> dict:
     )
     builder.Connect(plant.get_net_actuation_output_port(), meter.actuation_input)
     builder.Connect(plant.get_state_output_port(), meter.state_input)
-    period = float(os.environ.get("LD_SLIP_LOG", "0.05"))
+    period = 0.05
     log_pose = LogVectorOutput(h.truth.pose_output, builder, period)
     log_enc = LogVectorOutput(h.encoders.GetOutputPort("angles"), builder, period)
     log_wheel = LogVectorOutput(h.contact.wheel_state_output, builder, period)
@@ -184,7 +191,7 @@ def run_slip_case(case: SlipCase) -> dict:
     g = rng.generator(case.seed, "slip_study/spawn")
     y0 = float(g.uniform(-0.5, 0.5))
     yaw0 = math.radians(float(g.normal(0.0, 0.5)))
-    x0 = hf.bounds.left + 3.0
+    x0 = hf.bounds.left + RAMP_START_M
     X = spawn_pose(heightfield=hf, rover=rover, x_m=x0, y_m=y0, yaw_rad=yaw0, soil=soil)
     plant.SetFloatingBaseBodyPoseInWorldFrame(
         plant.GetMyMutableContextFromRoot(ctx), rover.chassis, X
@@ -194,12 +201,27 @@ def run_slip_case(case: SlipCase) -> dict:
     # Advance in chunks until the rover has climbed the distance (or time runs out).
     t = 0.0
     pose_port = h.truth.pose_output
+    fwd0 = X.rotation().matrix()[:, 0]
+    off_port = h.contact.off_terrain_output
+    stop = "distance reached"
     while t < t_end:
         t = min(t + 2.0, t_end)
-        sim.AdvanceTo(t)
+        try:
+            sim.AdvanceTo(t)
+        except RuntimeError as exc:  # a diverging case must not take the sweep down
+            stop = f"simulation failed at t = {sim.get_context().get_time():.2f} s: {exc}"
+            break
         p = pose_port.Eval(h.truth.GetMyContextFromRoot(ctx))[:3]
         if np.linalg.norm(p - start) >= case.distance_m:
             break
+        if off_port.Eval(h.contact.GetMyContextFromRoot(ctx))[0] > 0.5:
+            stop = "left the ramp"
+            break
+        if np.dot(p - start, fwd0) < -SLIDE_BACK_STOP_M:
+            stop = "slid back (immobilized)"
+            break
+    else:
+        stop = "time limit"
     nf = 6
     times = log_pose.FindLog(ctx).sample_times()
     pose = log_pose.FindLog(ctx).data()
@@ -243,6 +265,7 @@ def run_slip_case(case: SlipCase) -> dict:
         "energy_J": float(energy[i1] - energy[i0]),
         "distance_m": float(travelled[i1]),
         "time_s": float(times[i1]),
+        "stop": stop,
     }
     params = {
         "rover": case.rover,

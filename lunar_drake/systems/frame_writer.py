@@ -55,7 +55,9 @@ class FrameWriter(LeafSystem):
         }
         # Just after each camera update (same period, tiny offset).
         self.DeclarePeriodicPublishEvent(1.0 / rate_hz, 1e-6, self._publish)
+        # Bookkeeping for the run summary only (the files are the real output).
         self.written: list[Path] = []
+        self.frames_written: set[int] = set()
 
     def _publish(self, context):
         k = int(self.frame_index_input.Eval(context)[0])
@@ -68,4 +70,5 @@ class FrameWriter(LeafSystem):
             write_png(p, raw)
             write_png(self._dir / f"{n}_{k:06d}_preview.png", prev)
             self.written.append(p)
+        self.frames_written.add(k)
         return EventStatus.Succeeded()

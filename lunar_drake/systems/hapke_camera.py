@@ -217,12 +217,23 @@ class HapkeCamera(LeafSystem):
             raise OutOfRangeError(f"camera gain = {gain!r}; must be > 0")
         lightmap = self._optional(self.lightmap_input, context)
         tracks_in = self._optional(self.track_depth_input, context)
+        spots = []
+        for b, p_BL, d_BL, tmpl in self._lights:
+            X_WB = poses[int(b)]
+            spots.append(
+                dc.replace(
+                    tmpl,
+                    position_W=tuple(X_WB.multiply(p_BL)),
+                    direction_W=tuple(X_WB.rotation().multiply(d_BL)),
+                )
+            )
         illum, sun_up = self._r.illumination(
             sun_dir_W=sun,
             sun_distance_km=sun_d,
             earth_dir_W=earth if np.any(earth) else None,
             earth_distance_km=earth_d,
             earth_phase=phase,
+            spotlights=spots,
         )
         dyn = [query.GetPoseInWorld(g).GetAsMatrix4() for g in self._gids]
         frames = {}
@@ -243,7 +254,6 @@ class HapkeCamera(LeafSystem):
                 gain=gain,
                 key=self._keys[mt.name],
                 frame_index=index,
-                sun_distance_km=sun_d,
             )
             preview = sensor_mod.to_preview_8bit(
                 raw,

@@ -9,7 +9,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.math import SpatialForce, SpatialVelocity
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
 
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import (
@@ -58,7 +58,6 @@ class WheelRegolithContact(LeafSystem):
 
     Args:
         wheel_bodies: BodyIndex of each wheel (axle = body +y, origin at the centre).
-        wheel_parents: BodyIndex of each wheel's parent (for the spin rate).
         wheel: wheel radius and width. soil: soil parameters.
         belly_body: BodyIndex of the chassis; belly_points_B: (k, 3) points in it (m).
         belly_stiffness_N_per_m, belly_damping_Ns_per_m, belly_friction: penalty law
@@ -70,7 +69,6 @@ class WheelRegolithContact(LeafSystem):
         self,
         *,
         wheel_bodies,
-        wheel_parents,
         wheel: tm.WheelParams,
         soil: tm.SoilParams,
         belly_body=None,
@@ -84,9 +82,8 @@ class WheelRegolithContact(LeafSystem):
     ):
         super().__init__()
         self._wheels = [int(b) for b in wheel_bodies]
-        self._parents = [int(b) for b in wheel_parents]
-        if len(self._wheels) != len(self._parents) or not self._wheels:
-            raise ValueError("wheel_bodies and wheel_parents must be equal, non-empty lists")
+        if not self._wheels:
+            raise ValueError("wheel_bodies must be a non-empty list of BodyIndex")
         self._wheel = wheel
         self._soil = soil
         self._belly = None if belly_body is None else int(belly_body)
@@ -112,6 +109,19 @@ class WheelRegolithContact(LeafSystem):
             "heightfield",
             AbstractValue.Make(Heightfield.from_array(np.zeros((4, 4)), resolution_m=1.0)),
         )
+        # One contact evaluation per context change, shared by the three outputs.
+        self._cache = self.DeclareCacheEntry(
+            description="wheel-soil contact",
+            value_producer=ValueProducer(
+                allocate=lambda: AbstractValue.Make(None),
+                calc=lambda context, out: out.set_value(self._compute(context)),
+            ),
+            prerequisites_of_calc={
+                self.input_port_ticket(self.body_poses_input.get_index()),
+                self.input_port_ticket(self.body_spatial_velocities_input.get_index()),
+                self.input_port_ticket(self.heightfield_input.get_index()),
+            },
+        )
         self.spatial_forces_output = self.DeclareAbstractOutputPort(
             "spatial_forces",
             lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
@@ -136,7 +146,6 @@ class WheelRegolithContact(LeafSystem):
         V = [vels[i] for i in self._wheels]
         v = np.array([x.translational() for x in V])
         wv = np.array([x.rotational() for x in V])
-        wp = np.array([vels[i].rotational() for i in self._parents])
         g = wheel_contact_geometry(
             heightfield=hf,
             p_WWo=p,
@@ -150,7 +159,9 @@ class WheelRegolithContact(LeafSystem):
         v_x = np.einsum("ij,ij->i", v, g.forward_W)
         v_y = np.einsum("ij,ij->i", v, g.lateral_W)
         z_dot = -np.einsum("ij,ij->i", v, g.n_W)
-        spin = np.einsum("ij,ij->i", wv - wp, axle)
+        # Absolute spin about the axle: the rim's slip against the ground does not care
+        # which body the wheel hangs from (a pitching rocker must not look like slip).
+        spin = np.einsum("ij,ij->i", wv, axle)
         slip = tm.slip_ratio(omega_r=spin * w.radius_m, v=v_x, v_eps=self._v_eps)
         beta = tm.slip_angle(v_x=v_x, v_y=v_y, v_eps=self._v_eps)
         N = tm.normal_force(z, z_dot, wheel=w, soil=self._soil) * on
@@ -203,8 +214,11 @@ class WheelRegolithContact(LeafSystem):
                 belly = (Fb.sum(axis=0), np.cross(r_b, Fb).sum(axis=0))
         return p, F, tau, state, belly, off
 
+    def _cached(self, context):
+        return self._cache.Eval(context)
+
     def _calc_forces(self, context, output):
-        _p, F, tau, _, belly, _ = self._compute(context)
+        _p, F, tau, _, belly, _ = self._cached(context)
         forces = []
         for k, b in enumerate(self._wheel_index_objs):
             e = ExternallyAppliedSpatialForce()
@@ -222,9 +236,9 @@ class WheelRegolithContact(LeafSystem):
         output.set_value(forces)
 
     def _calc_wheel_state(self, context, output):
-        _, _, _, state, _, _ = self._compute(context)
+        _, _, _, state, _, _ = self._cached(context)
         output.SetFromVector(state.ravel())
 
     def _calc_off_terrain(self, context, output):
-        *_, off = self._compute(context)
+        *_, off = self._cached(context)
         output.SetFromVector([1.0 if off else 0.0])
