@@ -48,8 +48,13 @@ def main(argv=None) -> int:
         wall = time.perf_counter() - t0
         ctx = diagram.GetMyContextFromRoot(sim.get_context())
         pose = diagram.GetOutputPort("rover.pose").Eval(ctx)
-        runs.append({"wall_s": wall, "rtf": args.sim_s / wall,
-                     "final_xy_m": [float(pose[0]), float(pose[1])]})
+        runs.append(
+            {
+                "wall_s": wall,
+                "rtf": args.sim_s / wall,
+                "final_xy_m": [float(pose[0]), float(pose[1])],
+            }
+        )
     med = statistics.median(r["rtf"] for r in runs)
     result = {
         "benchmark": "sim_rate",
@@ -64,8 +69,10 @@ def main(argv=None) -> int:
     print(f"{'run':>4} {'wall (s)':>9} {'real-time factor':>17}")
     for k, r in enumerate(runs):
         print(f"{k:>4} {r['wall_s']:>9.2f} {r['rtf']:>16.2f}x")
-    print(f"median real-time factor: {med:.2f}x (goal >= 5x; {args.sim_s:g} s simulated, "
-          f"plant step {scenario.plant_config.time_step * 1e3:g} ms)")
+    print(
+        f"median real-time factor: {med:.2f}x (goal >= 5x; {args.sim_s:g} s simulated, "
+        f"plant step {scenario.plant_config.time_step * 1e3:g} ms)"
+    )
     if args.out:
         Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
     return 0

@@ -198,8 +198,9 @@ def test_default_rover_drives_100_m_over_the_default_site(cache, tmp_path):
     from lunar_drake.site import ensure_site
 
     scenario = load_scenario(scenario_name="default")
-    result = run_mission(scenario=scenario, scenario_name="default", out_dir=tmp_path,
-                         progress=False, cameras=False)
+    result = run_mission(
+        scenario=scenario, scenario_name="default", out_dir=tmp_path, progress=False, cameras=False
+    )
     rv = result.summary["rover"]
     assert result.summary["stop_reason"] == "duration reached"
     assert rv["distance_m"] >= 100.0
