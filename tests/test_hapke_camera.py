@@ -218,3 +218,28 @@ def test_render_command_at_any_time(tmp_path, monkeypatch):
     import json
 
     assert json.loads((tmp_path / "r" / "render.json").read_text())["time_s"] == 5.0
+
+
+def test_lightmap_source_interpolates_baked_maps_lazily():
+    from lunar_drake.ephemeris.sun_earth import SiteLocation
+    from lunar_drake.errors import OutOfRangeError as OOR
+    from lunar_drake.render.lightmap import lightmap
+    from lunar_drake.systems.lightmap_source import LightmapSource
+
+    yy, xx = np.mgrid[0:64, 0:64]
+    z = (0.3 * np.sin(xx / 5.0) * np.cos(yy / 7.0)).astype(np.float32)
+    hf = Heightfield.from_array(z, resolution_m=0.1)
+    src = LightmapSource(
+        heightfield=hf,
+        site=SiteLocation(-85.4, 31.6),
+        epoch_utc="2027-11-15T00:00:00",
+        duration_s=7200.0,
+    )
+    assert src.times_s == (0.0, 3600.0, 7200.0)
+    a, e = src.sun_az_el_deg[1]
+    direct = lightmap(z, sun_azimuth_deg=a, sun_elevation_deg=e, resolution_m=0.1)
+    np.testing.assert_array_equal(src.lightmap_at(3600.0), direct)
+    mid = src.lightmap_at(1800.0)
+    np.testing.assert_allclose(mid, 0.5 * (src.lightmap_at(0.0) + direct), atol=1e-6)
+    with pytest.raises(OOR, match="outside"):
+        src.lightmap_at(9000.0)

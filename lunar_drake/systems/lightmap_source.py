@@ -37,9 +37,10 @@ class LightmapSource(LeafSystem):
         - lightmap
 
     The lightmaps (fraction of the solar disk visible from every cell, with penumbra and
-    terrain horizons; :mod:`lunar_drake.render.lightmap`) are baked at construction at
-    ``interval_s`` spacing over ``[0, duration_s]`` (at least the two ends) and
-    interpolated linearly in time -- the paper's hourly-lightmap plan. The output is a
+    terrain horizons; :mod:`lunar_drake.render.lightmap`) are tabulated at
+    ``interval_s`` spacing over ``[0, duration_s]`` (at least the two ends), baked on
+    first use (a few kept in memory) and interpolated linearly in time -- the paper's
+    hourly-lightmap plan. The output is a
     :class:`~lunar_drake.render.shading.RasterSampler` over the site ``(x, y) -> [0, 1]``.
 
     Args:
@@ -60,8 +61,6 @@ class LightmapSource(LeafSystem):
         progress: bool = False,
     ):
         super().__init__()
-        from lunar_drake.render.lightmap import lightmap_series
-
         z, res = heightfield.decimated(max_size=max_px)
         n = max(2, math.ceil(duration_s / interval_s) + 1)
         times = (
@@ -72,15 +71,14 @@ class LightmapSource(LeafSystem):
         az, el = sun_grid_az_el(
             site=site, epoch_utc=epoch_utc, times_s=times, extra_kernels=extra_kernels
         )
-        lut = {float(t): (float(a), float(e)) for t, a, e in zip(times, az, el, strict=True)}
-        self.series = lightmap_series(
-            np.asarray(z, np.float32),
-            times=times,
-            sun_az_el_at=lambda t: lut[float(t)],
-            resolution_m=res,
-            progress=progress,
-        )
+        self.times_s = tuple(float(t) for t in times)
+        self.sun_az_el_deg = tuple((float(a), float(e)) for a, e in zip(az, el, strict=True))
+        self._z = np.asarray(z, np.float32)
+        self._res = float(res)
         self._hf = heightfield
+        self._progress = progress
+        self._maps: dict[int, np.ndarray] = {}  # a bounded cache of baked maps
+        self._bake(0)  # bake the first map now, so a bad DEM fails at build time
         self.lightmap_output = self.DeclareAbstractOutputPort(
             "lightmap",
             lambda: AbstractValue.Make(object()),
@@ -88,6 +86,39 @@ class LightmapSource(LeafSystem):
             prerequisites_of_calc={self.time_ticket()},
         )
 
+    def _bake(self, k: int) -> np.ndarray:
+        """Map k, baked on first use; only the most recent few are kept (memory stays
+        bounded over a lunar-day run). Baking is deterministic, so a re-bake is
+        bit-identical."""
+        if k not in self._maps:
+            from lunar_drake.render.lightmap import lightmap
+
+            a, e = self.sun_az_el_deg[k]
+            self._maps[k] = lightmap(
+                self._z,
+                sun_azimuth_deg=a,
+                sun_elevation_deg=e,
+                resolution_m=self._res,
+                progress=self._progress,
+            )
+            while len(self._maps) > 3:
+                self._maps.pop(max(self._maps, key=lambda j: abs(j - k)))
+        return self._maps[k]
+
+    def lightmap_at(self, t: float) -> np.ndarray:
+        """Lit fraction at sim time ``t`` (s): linear between the bracketing baked maps."""
+        ts = self.times_s
+        if not ts[0] <= t <= ts[-1]:
+            from lunar_drake.errors import OutOfRangeError
+
+            raise OutOfRangeError(
+                f"t = {t!r} s is outside the baked lightmaps' times [{ts[0]:g}, {ts[-1]:g}] s"
+            )
+        k = min(int(np.searchsorted(ts, t, side="right")) - 1, len(ts) - 2)
+        f = (t - ts[k]) / (ts[k + 1] - ts[k])
+        a, b = self._bake(k), self._bake(k + 1)
+        return (a + np.float32(f) * (b - a)).astype(np.float32)
+
     def _calc(self, context, output):
-        lm = self.series.at(context.get_time())
+        lm = self.lightmap_at(context.get_time())
         output.set_value(RasterSampler.on_heightfield(lm, self._hf, outside=1.0))
