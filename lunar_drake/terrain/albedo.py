@@ -44,6 +44,7 @@ import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.terrain.grid import window_batches
 
 RAY_BINS = 48
 """Number of random azimuth samples of a crater's ray profile (about 7.5 degrees apart)."""
@@ -317,12 +318,18 @@ def _splash(x, y, cx, cy, d, f, p: AlbedoParams) -> np.ndarray | None:
     scale = (fade[hit] / (e2_64 - 1.0)).astype(np.float32)
     c_lo, c_hi, r_lo, r_hi = c_lo[hit], c_hi[hit], r_lo[hit], r_hi[hit]
     cx, cy = cx[hit], cy[hit]
-    classes = np.array(_SIZE_CLASSES)
-    hcls = np.searchsorted(classes, r_hi - r_lo)  # first class >= rows
-    wcls = np.searchsorted(classes, c_hi - c_lo)
+    big, batches = window_batches(
+        r_lo,
+        r_hi,
+        c_lo,
+        c_hi,
+        nrows=nrows,
+        ncols=ncols,
+        classes=_SIZE_CLASSES,
+        chunk_pixels=_CHUNK_PIXELS,
+    )
     out = np.zeros((nrows, ncols), dtype=np.float32)
-    big = (hcls == classes.size) | (wcls == classes.size)
-    for m in np.flatnonzero(big):
+    for m in big:
         # A large window in bands of rows, each cut to the columns of the splash disc's
         # chord (plus a pixel): pixels left out would only receive zeros.
         band = int(min(64, max(1, _CHUNK_PIXELS // int(c_hi[m] - c_lo[m]))))
@@ -343,22 +350,12 @@ def _splash(x, y, cx, cy, d, f, p: AlbedoParams) -> np.ndarray | None:
             vals = _splash_values(dx, dy, e2[sl], scale[sl], tables[sl])
             view = out[a0:a1, b0:b1]
             np.maximum(view, vals[0], out=view)
-    group = np.where(big, -1, hcls * classes.size + wcls)
-    for g in np.unique(group[~big]):
-        members = np.flatnonzero(group == g)
-        hh, ww = int(classes[g // classes.size]), int(classes[g % classes.size])
-        chunk = max(1, _CHUNK_PIXELS // (hh * ww))
-        for k0 in range(0, members.size, chunk):
-            mm = members[k0 : k0 + chunk]
-            # Windows of the class size from each box's low corner, clamped into the
-            # tile (duplicated edge columns are computed but never written).
-            cols = np.minimum(c_lo[mm][:, None] + np.arange(ww), ncols - 1)
-            rows = np.minimum(r_lo[mm][:, None] + np.arange(hh), nrows - 1)
-            dx = ((x[cols] - cx[mm][:, None]) * inv_r[mm][:, None]).astype(np.float32)
-            dy = ((y[rows] - cy[mm][:, None]) * inv_r[mm][:, None]).astype(np.float32)
-            vals = _splash_values(dx, dy, e2[mm], scale[mm], tables[mm])
-            for j, m in enumerate(mm):
-                a0, a1, b0, b1 = r_lo[m], r_hi[m], c_lo[m], c_hi[m]
-                view = out[a0:a1, b0:b1]
-                np.maximum(view, vals[j, : a1 - a0, : b1 - b0], out=view)
+    for mm, rows, cols in batches:
+        dx = ((x[cols] - cx[mm][:, None]) * inv_r[mm][:, None]).astype(np.float32)
+        dy = ((y[rows] - cy[mm][:, None]) * inv_r[mm][:, None]).astype(np.float32)
+        vals = _splash_values(dx, dy, e2[mm], scale[mm], tables[mm])
+        for j, m in enumerate(mm):
+            a0, a1, b0, b1 = r_lo[m], r_hi[m], c_lo[m], c_hi[m]
+            view = out[a0:a1, b0:b1]
+            np.maximum(view, vals[j, : a1 - a0, : b1 - b0], out=view)
     return out

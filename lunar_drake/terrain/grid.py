@@ -53,3 +53,34 @@ class GridSpec:
         col = np.asarray(x, dtype=float) / res + 0.5 * self.ncols - 0.5
         row = 0.5 * self.nrows - 0.5 - np.asarray(y, dtype=float) / res
         return row, col
+
+
+def window_batches(r_lo, r_hi, c_lo, c_hi, *, nrows: int, ncols: int, classes, chunk_pixels: int):
+    """Groups per-object pixel boxes ``[r_lo, r_hi) x [c_lo, c_hi)`` of a tile into
+    batches of equal padded size, for one elementwise kernel per batch.
+
+    Returns ``(big, batches)``: ``big`` are the indices whose box exceeds the largest
+    size class (the caller handles them one by one); ``batches`` yields
+    ``(members, rows, cols)`` with ``rows`` (n, hh) and ``cols`` (n, ww) the pixel indices
+    of each member's window of the class size from its box's low corner, clamped into
+    the tile (duplicated edge pixels are computed but must not be written). Batching
+    never changes a value: a pixel's result does not depend on its batch.
+    """
+    classes = np.asarray(classes)
+    hcls = np.searchsorted(classes, np.asarray(r_hi) - r_lo)  # first class >= rows
+    wcls = np.searchsorted(classes, np.asarray(c_hi) - c_lo)
+    big = (hcls == classes.size) | (wcls == classes.size)
+
+    def batches():
+        group = np.where(big, -1, hcls * classes.size + wcls)
+        for g in np.unique(group[~big]):
+            members = np.flatnonzero(group == g)
+            hh, ww = int(classes[g // classes.size]), int(classes[g % classes.size])
+            chunk = max(1, chunk_pixels // (hh * ww))
+            for k0 in range(0, members.size, chunk):
+                mm = members[k0 : k0 + chunk]
+                cols = np.minimum(c_lo[mm][:, None] + np.arange(ww), ncols - 1)
+                rows = np.minimum(r_lo[mm][:, None] + np.arange(hh), nrows - 1)
+                yield mm, rows, cols
+
+    return np.flatnonzero(big), batches()

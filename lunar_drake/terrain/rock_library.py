@@ -44,6 +44,7 @@ import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.terrain.grid import window_batches
 
 EMBEDMENT = 0.15
 """Fraction of a rock's vertical extent buried below its seat height (dimensionless)."""
@@ -407,29 +408,27 @@ def stamp_rocks(
     halfpx = 0.5 * res * (1.0 + 1e-9)
     # z = max(z, rock surface) is order independent, so rocks are evaluated in batches
     # of equal-size windows by one elementwise kernel (batching never changes a value).
-    classes = np.array(_SIZE_CLASSES)
-    hcls = np.searchsorted(classes, r_hi - r_lo)
-    wcls = np.searchsorted(classes, c_hi - c_lo)
-    big = (hcls == classes.size) | (wcls == classes.size)
-    for m in np.flatnonzero(big):
+    big, batches = window_batches(
+        r_lo,
+        r_hi,
+        c_lo,
+        c_hi,
+        nrows=nrows,
+        ncols=ncols,
+        classes=_SIZE_CLASSES,
+        chunk_pixels=_CHUNK_PIXELS,
+    )
+    for m in big:
         a0, a1, b0, b1 = r_lo[m], r_hi[m], c_lo[m], c_hi[m]
         surf = _rock_surface(x[None, b0:b1], y[None, a0:a1], rk.take([m]), flat, s, halfpx)
         view = z[a0:a1, b0:b1]
         np.maximum(view, surf[0], out=view)
-    group = np.where(big, -1, hcls * classes.size + wcls)
-    for g in np.unique(group[~big]):
-        members = np.flatnonzero(group == g)
-        hh, ww = int(classes[g // classes.size]), int(classes[g % classes.size])
-        chunk = max(1, _CHUNK_PIXELS // (hh * ww))
-        for k0 in range(0, members.size, chunk):
-            mm = members[k0 : k0 + chunk]
-            cols = np.minimum(c_lo[mm][:, None] + np.arange(ww), ncols - 1)
-            rows = np.minimum(r_lo[mm][:, None] + np.arange(hh), nrows - 1)
-            surf = _rock_surface(x[cols], y[rows], rk.take(mm), flat, s, halfpx)
-            for j, m in enumerate(mm):
-                a0, a1, b0, b1 = r_lo[m], r_hi[m], c_lo[m], c_hi[m]
-                view = z[a0:a1, b0:b1]
-                np.maximum(view, surf[j, : a1 - a0, : b1 - b0], out=view)
+    for mm, rows, cols in batches:
+        surf = _rock_surface(x[cols], y[rows], rk.take(mm), flat, s, halfpx)
+        for j, m in enumerate(mm):
+            a0, a1, b0, b1 = r_lo[m], r_hi[m], c_lo[m], c_hi[m]
+            view = z[a0:a1, b0:b1]
+            np.maximum(view, surf[j, : a1 - a0, : b1 - b0], out=view)
     # Rock wherever some rock surface stands above the pre-rock terrain by > threshold;
     # z = max(z0, surfaces), so that is exactly z > z0 + threshold.
     z0 += np.float32(MASK_THRESHOLD_M)
