@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform
 from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
@@ -216,7 +216,6 @@ def test_spawn_errors_are_clear():
     holes = Heightfield.from_array(z, resolution_m=0.05)
     with pytest.raises(NoDataError, match="nodata"):
         spawn_pose(heightfield=holes, rover=rover, x_m=0.0, y_m=0.0, yaw_rad=0.0, soil=SOIL)
-    assert RotationMatrix  # imported for readers of the spawn frame conventions
 
 
 def test_bad_rover_and_soil_values_are_rejected():
