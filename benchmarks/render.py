@@ -11,16 +11,19 @@ of view; the Sun and Earth from the ephemeris at the scenario epoch (sim time 0)
 Frame ``i`` moves the camera ``i * --step`` (0.1 m) east, following the ground, so
 nothing is cached between frames; the LOD centre stays put (< lod_recenter_m of motion).
 
-Hapke (:class:`lunar_drake.render.camera.TerrainCameraRenderer`, full shading): one ray
-per pixel into the LOD terrain and the rover meshes, Hapke blended BRDF x albedo map x
-baked lightmap (baked once beforehand, not timed; its bake time is reported) x soft
-rover shadow, indirect fill, Earthshine; then the sensor (``expose``: exposure, noise,
-12-bit codes). ``hapke_fps = 1 / median(shade + expose)`` over ``--frames`` frames
-after one warm-up frame (which builds the LOD and the ray-casting BVH). A second pass
-renders the same frames with the renderer module's :func:`~lunar_drake.render.shading.
-trace` (ray cast + G-buffer) and :func:`~lunar_drake.render.shading.shade` wrapped in
-timers (the rest of ``TerrainCameraRenderer.shade`` is "other"); its images are checked
-bit-identical to the first pass.
+Hapke (:class:`lunar_drake.render.camera.TerrainCameraRenderer`, full shading, engine
+``--engine``, default ``heightfield``): one ray per pixel (the heightfield engine marches
+the DEM's mip pyramid and casts Embree rays only where the rover projects; the raycast
+engine casts every ray into the LOD triangles and the rover meshes), Hapke blended BRDF x
+albedo map x baked lightmap (baked once beforehand, not timed; its bake time is
+reported) x soft rover shadow, indirect fill, Earthshine; then the sensor (``expose``:
+exposure, noise, 12-bit codes). ``hapke_fps = 1 / median(shade + expose)`` over
+``--frames`` frames after one warm-up frame (which builds the LOD and BVH, or the DEM
+pyramid and the reflectance table). A second pass renders the same frames with the
+engine's visibility and shading calls wrapped in timers (the rest is "other"); its
+images are checked bit-identical to the first pass. With ``--reference-frames N`` (3) the
+raycast reference engine renders the first N frames too (``reference_engine`` in the
+JSON: its frame rate and its agreement with the timed engine on frame 1).
 
 VTK (:class:`lunar_drake.render.vtk_reference.VtkReferenceCamera`): the same LOD mesh
 (``TerrainLOD.merged()``, skirts included -- the very triangles the ray caster sees)
@@ -39,6 +42,7 @@ Prints a table; writes JSON with --out. Goals: hapke_fps >= 10, ratio >= 2.
 from __future__ import annotations
 
 import argparse
+import dataclasses as dc
 import hashlib
 import json
 import math
@@ -119,16 +123,25 @@ def _gl_libraries() -> list[str]:
         return []
 
 
-def split_frames(renderer, poses, illum, dyn, lmap, frames) -> dict:
-    """Renders frames 1..frames again with ``lunar_drake.render.camera``'s ``trace`` and
-    ``shade`` wrapped in timers; per-frame seconds of each and of the rest of
+def split_frames(renderer, poses, illum, dyn, lmap, frames, engine="raycast") -> dict:
+    """Renders frames 1..frames again with the engine's visibility and shading calls
+    wrapped in timers (raycast: ``lunar_drake.render.camera``'s ``trace`` and ``shade``;
+    heightfield: ``lunar_drake.render.fast_engine``'s ``trace_heightfield`` and
+    ``_shade_terrain``); per-frame seconds of each and of the rest of
     ``TerrainCameraRenderer.shade``, and radiance hashes. Empty if the module does not
     use those names."""
-    import lunar_drake.render.camera as camera_mod
+    if engine == "raycast":
+        import lunar_drake.render.camera as camera_mod
+
+        names = ("trace", "shade")
+    else:
+        import lunar_drake.render.fast_engine as camera_mod
+
+        names = ("trace_heightfield", "_shade_terrain")
 
     out = {"trace": [], "shade": [], "other": [], "hashes": []}
-    orig_trace = getattr(camera_mod, "trace", None)
-    orig_shade = getattr(camera_mod, "shade", None)
+    orig_trace = getattr(camera_mod, names[0], None)
+    orig_shade = getattr(camera_mod, names[1], None)
     if orig_trace is None or orig_shade is None:
         return out
     acc = {}
@@ -142,8 +155,8 @@ def split_frames(renderer, poses, illum, dyn, lmap, frames) -> dict:
 
         return wrapper
 
-    camera_mod.trace = timed("trace", orig_trace)
-    camera_mod.shade = timed("shade", orig_shade)
+    setattr(camera_mod, names[0], timed("trace", orig_trace))
+    setattr(camera_mod, names[1], timed("shade", orig_shade))
     try:
         for i in range(1, frames + 1):
             acc.clear()
@@ -156,7 +169,8 @@ def split_frames(renderer, poses, illum, dyn, lmap, frames) -> dict:
             out["other"].append(total - tr - sd)
             out["hashes"].append(_hash(sh.radiance))
     finally:
-        camera_mod.trace, camera_mod.shade = orig_trace, orig_shade
+        setattr(camera_mod, names[0], orig_trace)
+        setattr(camera_mod, names[1], orig_shade)
     if not out["trace"] or min(out["trace"]) == 0.0:  # trace not called through the module
         return {"trace": [], "shade": [], "other": [], "hashes": []}
     return out
@@ -249,6 +263,18 @@ def main(argv=None) -> int:
     p.add_argument("--tilt", type=float, default=14.0, help="camera pitch down (deg)")
     p.add_argument("--step", type=float, default=0.1, help="camera motion per frame (m)")
     p.add_argument("--no-rover", action="store_true", help="terrain only (no rover meshes)")
+    p.add_argument(
+        "--engine",
+        default="heightfield",
+        choices=["heightfield", "raycast"],
+        help="Hapke camera engine timed for hapke_fps (default: heightfield)",
+    )
+    p.add_argument(
+        "--reference-frames",
+        type=int,
+        default=3,
+        help="also time this many frames of the raycast reference engine (0: skip)",
+    )
     p.add_argument("--no-vtk", action="store_true", help="skip the RenderEngineVtk reference")
     p.add_argument("--vtk-shadows", action="store_true", help="VTK shadow mapping on")
     p.add_argument("--no-size-check", action="store_true", help="skip the half-size VTK timing")
@@ -308,6 +334,7 @@ def main(argv=None) -> int:
         height=args.height,
         fov_y_deg=args.fov,
         shadow_samples=s.camera.shadow_samples,
+        engine=args.engine,
     )
     plant, sg, rover, _diagram, dctx = _rover_plant(s, hf)  # keep the diagram alive
     head = rover.left_camera.body()
@@ -375,7 +402,6 @@ def main(argv=None) -> int:
             gain=model.gain,
             key=key,
             frame_index=i,
-            sun_distance_km=sun_km,
         )
         t2 = time.perf_counter()
         return sh, raw, t1 - t0, t2 - t1
@@ -409,11 +435,52 @@ def main(argv=None) -> int:
 
     # Second pass: the same frames with the camera module's trace() and shade() wrapped
     # in timers (whatever else TerrainCameraRenderer.shade does is "other").
-    split = split_frames(renderer, poses, illum, dyn, lmap, args.frames)
+    split = split_frames(renderer, poses, illum, dyn, lmap, args.frames, args.engine)
     trace_s, split_shade_s, other_s = split["trace"], split["shade"], split["other"]
     split_same = split["hashes"] == radiance_hashes if split["hashes"] else None
 
     hapke_fps = 1.0 / _median(total_s)
+
+    # --- the raycast reference engine on the same frames --------------------------------
+    reference = None
+    if args.engine != "raycast" and args.reference_frames > 0:
+        ref = TerrainCameraRenderer(
+            heightfield=hf,
+            albedo=albedo,
+            model=dc.replace(model, engine="raycast"),
+            dynamic_meshes=[m for _, m in geometry],
+        )
+        ref.shade(X_WC=poses[0], illumination=illum, dynamic_poses=dyn, lightmap=lmap)
+        ref_s, agree = [], None
+        for i in range(1, min(args.reference_frames, args.frames) + 1):
+            t0 = time.perf_counter()
+            rs = ref.shade(X_WC=poses[i], illumination=illum, dynamic_poses=dyn, lightmap=lmap)
+            ref.expose(rs, exposure_s=model.exposure_s, gain=model.gain, key=key, frame_index=i)
+            ref_s.append(time.perf_counter() - t0)
+            if i == 1:
+                fs = renderer.shade(
+                    X_WC=poses[i], illumination=illum, dynamic_poses=dyn, lightmap=lmap
+                )
+                both = (fs.label == rs.label) & (rs.label > 0)
+                rel = np.abs(fs.radiance[both] - rs.radiance[both]) / np.maximum(
+                    rs.radiance[both], 1e-4
+                )
+                agree = {
+                    "label_agreement": float((fs.label == rs.label).mean()),
+                    "radiance_rel_diff_median": float(np.median(rel)),
+                    "radiance_rel_diff_p90": float(np.quantile(rel, 0.9)),
+                    "mean_i_over_f": [
+                        float(fs.radiance[both].mean()),
+                        float(rs.radiance[both].mean()),
+                    ],
+                }
+        reference = {
+            "engine": "raycast",
+            "total_s_median": _median(ref_s),
+            "fps": 1.0 / _median(ref_s),
+            "frames": len(ref_s),
+            "agreement_frame_1": agree,
+        }
 
     # --- VTK --------------------------------------------------------------------------
     vtk, vtk_error, obj_s = None, None, None
@@ -494,6 +561,8 @@ def main(argv=None) -> int:
             "vtk_color": vtk["color_s"] if vtk else [],
         },
         "split_pass_identical": split_same,
+        "engine": args.engine,
+        "reference_engine": reference,
         "lightmap_bake_s": bake_s,
         "lightmap_px": list(np.asarray(z).shape),
         "scene": {
@@ -534,12 +603,12 @@ def main(argv=None) -> int:
         f"{lod.triangle_count} LOD triangles (+{result['rover_triangles']} rover), "
         f"Sun az {az:.1f} el {el:.2f} deg, {args.frames} frames, {os.cpu_count()} CPUs"
     )
-    print(f"{'stage (median)':<34s} {'ms':>8s}")
+    print(f"{'stage (median), engine ' + args.engine:<34s} {'ms':>8s}")
     rows = [
-        ("hapke shade (trace + shade)", timings["hapke_shade_s"]),
-        ("  trace: ray cast + G-buffer", timings["hapke_trace_s"]),
-        ("  shade: Hapke, lightmap, shadow", timings["hapke_shade_only_s"]),
-        ("  other (LOD check, normals, ...)", timings["hapke_shade_other_s"]),
+        ("hapke shade (visibility + shading)", timings["hapke_shade_s"]),
+        ("  visibility (ray cast / DEM march)", timings["hapke_trace_s"]),
+        ("  shading kernel / numpy shade", timings["hapke_shade_only_s"]),
+        ("  other (rover, shadow rays, ...)", timings["hapke_shade_other_s"]),
         ("hapke expose (sensor)", timings["hapke_expose_s"]),
         ("hapke total", timings["hapke_total_s"]),
         ("hapke first frame (LOD + BVH)", timings["hapke_first_frame_s"]),
@@ -565,6 +634,15 @@ def main(argv=None) -> int:
         + ("null" if ratio is None else f"{ratio:.2f}")
         + f" (goal >= {GOALS['ratio']:g})"
     )
+    if reference:
+        ag = reference["agreement_frame_1"] or {}
+        print(
+            f"raycast reference engine: {1e3 * reference['total_s_median']:.1f} ms/frame "
+            f"({reference['fps']:.2f} fps, {reference['frames']} frames); labels agree "
+            f"{100 * ag.get('label_agreement', float('nan')):.2f}%, radiance rel. diff "
+            f"median {100 * ag.get('radiance_rel_diff_median', float('nan')):.2f}% "
+            f"p90 {100 * ag.get('radiance_rel_diff_p90', float('nan')):.2f}%"
+        )
     if vtk_error:
         print(f"VTK failed: {vtk_error}")
     if args.out:

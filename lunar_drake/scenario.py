@@ -176,6 +176,9 @@ class CameraConfig:
         lookahead_m: the gimbal points at the ground this far ahead of the rover (m).
         save_frames: write every frame into the run directory (frames/).
         spotlights: up to 4 rover lights.
+        engine: ``heightfield`` (fast: DEM ray marching, tabulated Hapke, compiled
+            shading) or ``raycast`` (reference: Embree over LOD triangles, exact Hapke);
+            docs/lighting.md compares them.
     """
 
     enabled: bool = True
@@ -189,6 +192,7 @@ class CameraConfig:
     lookahead_m: float = 6.0
     save_frames: bool = True
     spotlights: list[SpotlightConfig] = dc.field(default_factory=list)
+    engine: str = "heightfield"
 
 
 @dc.dataclass
@@ -390,6 +394,8 @@ def validate_scenario(s: Scenario) -> None:
     _check("camera.gain", c.gain, 0.0, 64.0, lo_open=True)
     _check("camera.shadow_samples", c.shadow_samples, 1, 64)
     _check("camera.lookahead_m", c.lookahead_m, 0.5, 1000.0, unit=" m")
+    if c.engine not in ("heightfield", "raycast"):
+        raise ConfigError(f"camera.engine = {c.engine!r}; allowed heightfield, raycast")
     if len(c.spotlights) > 4:
         raise OutOfRangeError(f"camera.spotlights has {len(c.spotlights)} lights; at most 4")
     for k, L in enumerate(c.spotlights):

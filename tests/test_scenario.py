@@ -31,6 +31,14 @@ def test_one_of_everything_sets_values():
     assert s.site.latitude_deg == -89.9
     assert s.simulator_config.max_step_size == 0.01
     assert s.visualization.publish_period == 0.05
+    assert s.camera.engine == "raycast"
+
+
+def test_unknown_camera_engine_is_rejected():
+    from lunar_drake.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"camera\.engine = 'gpu'; allowed heightfield, raycast"):
+        load_scenario(scenario_name="small", scenario_text="{camera: {engine: gpu}}")
 
 
 def test_round_trip_dump_load():

@@ -230,6 +230,7 @@ def _add_cameras(
         exposure_s=c.exposure_s,
         gain=c.gain,
         shadow_samples=c.shadow_samples,
+        engine=c.engine,
     )
     geometry = rover_meshes(
         plant,

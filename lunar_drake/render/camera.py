@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from lunar_drake.errors import OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
@@ -38,6 +38,9 @@ from lunar_drake.render.shading import (
     trace,
 )
 from lunar_drake.render.terrain_lod import TerrainLOD
+
+ENGINES = ("heightfield", "raycast")
+"""Camera engines: the fast DEM ray-marching engine and the Embree reference engine."""
 
 AU_KM = 149_597_870.7
 EARTH_RADIUS_KM = 6371.0
@@ -59,7 +62,14 @@ class CameraModel:
             scattered from sunlit distant terrain; an assumption).
         limb_blend_deg: emission angles (deg) over which Hapke blends into Lunar-Lambert.
         normal_map_max_px: the smooth-shading normal map is built from the DEM decimated
-            to at most this many pixels a side (0: use the LOD triangles' flat normals).
+            to at most this many pixels a side (0: use the LOD triangles' flat normals;
+            the heightfield engine then uses 4096).
+        engine: ``"heightfield"`` -- the fast engine (:mod:`lunar_drake.render.
+            fast_engine`: DEM ray marching, tabulated BRDF, one compiled shading pass)
+            -- or ``"raycast"`` -- the reference engine (Embree over LOD triangle tiles,
+            exact BRDF, numpy shading).
+        dem_max_px: the heightfield engine's DEM is decimated to at most this many
+            pixels a side.
     """
 
     width: int = 1280
@@ -75,8 +85,14 @@ class CameraModel:
     fill_fraction_sun_down: float = 0.003
     limb_blend_deg: tuple[float, float] = (84.0, 89.0)
     normal_map_max_px: int = 4096
+    engine: str = "heightfield"
+    dem_max_px: int = 8192
 
     def __post_init__(self):
+        if self.engine not in ENGINES:
+            raise ConfigError(f"engine = {self.engine!r}; allowed {', '.join(ENGINES)}")
+        if not 64 <= self.dem_max_px <= 65536:
+            raise OutOfRangeError(f"dem_max_px = {self.dem_max_px!r}; allowed 64..65536")
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
             raise OutOfRangeError(
                 f"camera size {self.width}x{self.height} px; allowed 16..8192 each"
@@ -154,6 +170,8 @@ class TerrainCameraRenderer:
         )
         self._config = ShadingConfig(shadow_samples=model.shadow_samples)
         self._normals = _normal_samplers(heightfield, max_px=model.normal_map_max_px)
+        self._hapke = hapke
+        self._fast = None
         self._camera = model.pinhole()
         self._raycaster = TerrainRaycaster()
         self._lod = None
@@ -164,6 +182,30 @@ class TerrainCameraRenderer:
     @property
     def raycaster(self) -> TerrainRaycaster:
         return self._raycaster
+
+    def fast_engine(self):
+        """The heightfield engine's per-site state (DEM pyramid, reflectance table),
+        built on first use (about a second for a 2048^2 site)."""
+        if self._fast is None:
+            from lunar_drake.render.fast_engine import FastTerrainEngine
+
+            normals = self._normals or _normal_samplers(self.heightfield, max_px=4096)
+            reflectance = functools.partial(
+                hapke_mod.blended_reflectance,
+                params=self._hapke,
+                start_deg=self.model.limb_blend_deg[0],
+                end_deg=self.model.limb_blend_deg[1],
+                dtype=np.float64,
+            )
+            self._fast = FastTerrainEngine.build(
+                heightfield=self.heightfield,
+                reflectance=reflectance,
+                normals=normals,
+                albedo=self._albedo,
+                config=self._config,
+                max_px=self.model.dem_max_px,
+            )
+        return self._fast
 
     def _ensure_lod(self, p_WC):
         c = (float(p_WC[0]), float(p_WC[1]))
@@ -244,9 +286,19 @@ class TerrainCameraRenderer:
         """Ray-casts and shades one frame (I/F-like radiance, depth, label). Pass
         ``lightmap=None`` when :meth:`illumination` says the Sun is down."""
         X = np.asarray(X_WC.GetAsMatrix4() if hasattr(X_WC, "GetAsMatrix4") else X_WC, float)
-        self._ensure_lod(X[:3, 3])
         if self._meshes:
             self._raycaster.set_dynamic_poses(list(dynamic_poses))
+        if self.model.engine == "heightfield":
+            return self.fast_engine().render(
+                camera=self._camera,
+                X_WC=X,
+                illumination=illumination,
+                raycaster=self._raycaster,
+                brdf=self._brdf,
+                lightmap=lightmap,
+                track_depth=track_depth,
+            )
+        self._ensure_lod(X[:3, 3])
         gb = trace(self._raycaster, self._camera, X)
         if self._normals is not None and gb.index.size:
             # Smooth shading: terrain normals from the DEM's normal map (bilinear), not

@@ -441,6 +441,8 @@ class GBuffer:
         label: ``(height, width)`` int16 (0 sky, 1 terrain, 2 rover, ...).
         depth: ``(height, width)`` float32 distance along the optical axis (m), inf = sky.
         pixel_angle_rad: angular size of a pixel, ``1 / max(fx, fy)`` (rad).
+        hits_compact: ``hits`` holds one entry per hit pixel (aligned with ``index``)
+            instead of one per image pixel.
     """
 
     width: int
@@ -455,6 +457,11 @@ class GBuffer:
     label: np.ndarray
     depth: np.ndarray
     pixel_angle_rad: float = 0.0
+    hits_compact: bool = False
+
+    def per_hit(self, a: np.ndarray) -> np.ndarray:
+        """A per-ray array of :attr:`hits` as one entry per hit pixel."""
+        return a if self.hits_compact else a[self.index]
 
 
 @dataclass(frozen=True)
@@ -775,7 +782,7 @@ def shade(
         if isinstance(albedo, str):
             if albedo != "vertex":
                 raise ConfigError(f"albedo = {albedo!r} is invalid; a callable, 'vertex' or None")
-            a = raycaster.vertex_albedo(gb.hits)[gb.index]
+            a = gb.per_hit(raycaster.vertex_albedo(gb.hits))
             a = np.where(np.isnan(a), np.float32(config.albedo_reference), a)
         else:
             a = np.asarray(albedo(x, y), dtype=np.float32)
@@ -783,7 +790,7 @@ def shade(
     dyn_idx = np.flatnonzero(gb.dynamic)
     lam = None  # Lambertian f_r of dynamic-mesh pixels, (M,)
     if dyn_idx.size:
-        lam = raycaster.dynamic_albedo(gb.hits)[gb.index] * np.float32(1.0 / math.pi)
+        lam = gb.per_hit(raycaster.dynamic_albedo(gb.hits)) * np.float32(1.0 / math.pi)
 
     def radiance_term(cos_i, cos_g, sel=None, fn=None):
         """f_r * cos_i for one light at pixels ``sel`` (all when None); cos_i >= 0."""
@@ -829,7 +836,7 @@ def shade(
                     bias_m=config.shadow_bias_m,
                     image_shape=(gb.height, gb.width),
                     pixel_index=gb.index,
-                    pixel_footprint_m=gb.hits.t_hit[gb.index] * np.float32(gb.pixel_angle_rad),
+                    pixel_footprint_m=gb.per_hit(gb.hits.t_hit) * np.float32(gb.pixel_angle_rad),
                     max_penumbra_px=int(config.max_penumbra_px),
                     active=lit,
                 )

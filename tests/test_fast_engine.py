@@ -1,0 +1,266 @@
+"""The fast Hapke camera engine: DEM ray marching, the reflectance table, rover pixels,
+and agreement with the Embree reference engine."""
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from lunar_drake.errors import OutOfRangeError
+from lunar_drake.render import hapke as hapke_mod
+from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+from lunar_drake.render.fast_engine import rover_pixel_mask
+from lunar_drake.render.hapke_lut import ReflectanceLUT
+from lunar_drake.render.heightfield_trace import DemPyramid, trace_heightfield
+from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
+from lunar_drake.render.shading import RasterSampler
+from lunar_drake.render.terrain_lod import TerrainLOD
+from lunar_drake.terrain.heightfield import Heightfield
+
+
+def _pose(p, *, yaw_deg=0.0, tilt_deg=15.0, roll_deg=0.0):
+    """X_WC of a Drake camera at p looking along yaw, pitched down, rolled."""
+    y, t = math.radians(yaw_deg), math.radians(tilt_deg)
+    z = np.array([math.cos(t) * math.cos(y), math.cos(t) * math.sin(y), -math.sin(t)])
+    x = np.array([math.sin(y), -math.cos(y), 0.0])
+    yv = np.cross(z, x)
+    r = math.radians(roll_deg)
+    x, yv = math.cos(r) * x + math.sin(r) * yv, -math.sin(r) * x + math.cos(r) * yv
+    X = np.eye(4)
+    X[:3, :3] = np.column_stack([x, yv, z])
+    X[:3, 3] = p
+    return X
+
+
+def _bumpy(n=256, res=0.1):
+    yy, xx = np.mgrid[0:n, 0:n] * res
+    z = 0.3 * np.sin(xx / 1.7) * np.cos(yy / 2.3) + 0.15 * np.sin(xx / 0.6 + yy / 0.9)
+    c = n * res / 2
+    z += 1.2 * np.exp(-((xx - c - 6) ** 2 + (yy - c) ** 2) / 4.0)  # a hill ahead
+    return Heightfield.from_array(z.astype(np.float32), resolution_m=res)
+
+
+def _cam(w=160, h=120, fov=50.0):
+    return PinholeCamera.from_fov(width=w, height=h, fov_y_rad=math.radians(fov))
+
+
+def _trace(pyr, cam, X, **kw):
+    return trace_heightfield(
+        pyr,
+        width=cam.width,
+        height=cam.height,
+        fx=cam.fx,
+        fy=cam.fy,
+        cx=cam.cx,
+        cy=cam.cy,
+        X_WC=X,
+        **kw,
+    )
+
+
+def test_tilted_plane_hits_are_exact_for_any_camera_roll():
+    n, res = 128, 0.2
+    yy, xx = np.mgrid[0:n, 0:n]
+    a, b = 0.05, -0.08  # plane z = a x + b y in site coordinates
+    hf0 = Heightfield.from_array(np.zeros((n, n), np.float32), resolution_m=res)
+    left, bottom, right, top = hf0.bounds
+    x = left + (xx + 0.5) * res
+    y = top - (yy + 0.5) * res
+    hf = Heightfield.from_array((a * x + b * y).astype(np.float32), resolution_m=res)
+    pyr = DemPyramid.from_heightfield(hf)
+    cam = _cam()
+    for roll in (0.0, 25.0):
+        X = _pose([0.5, -0.3, 2.0], yaw_deg=30.0, tilt_deg=20.0, roll_deg=roll)
+        tr = _trace(pyr, cam, X, iters=2)
+        d = tr.directions()
+        p = X[:3, 3]
+        # closed form: p_z + t d_z = a (p_x + t d_x) + b (p_y + t d_y)
+        den = d[2] - a * d[0] - b * d[1]
+        t_exact = np.where(den < 0, (a * p[0] + b * p[1] - p[2]) / den, np.inf)
+        hit = p[:, None] + t_exact * d
+        # silhouettes (here the DEM's edge) are decided per azimuth bin: up to half a
+        # pixel's footprint sideways; depths by the bin's centre ray (relative error of
+        # the order of the cross slope times half a pixel angle)
+        m = np.where(np.isfinite(t_exact), t_exact, 0.0) / cam.fx
+        inside = (hit[0] > left + m) & (hit[0] < right - m)
+        inside &= (hit[1] > bottom + m) & (hit[1] < top - m)
+        ok = np.isfinite(t_exact) & inside
+        assert ok.mean() > 0.3
+        np.testing.assert_allclose(tr.t[ok], t_exact[ok], rtol=1e-3)
+        assert np.isinf(tr.t[~np.isfinite(t_exact)]).all()  # sky stays sky
+
+
+def test_trace_agrees_with_embree_on_bumpy_terrain_and_sees_the_hill():
+    hf = _bumpy()
+    pyr = DemPyramid.from_heightfield(hf)
+    cam = _cam()
+    X = _pose([-4.0, 0.3, 1.4], tilt_deg=10.0)
+    tr = _trace(pyr, cam, X)
+    rc = TerrainRaycaster()
+    rc.set_terrain(TerrainLOD.build(hf, center_xy=(-4.0, 0.3), tile_px=64, near_radius_m=40.0))
+    rays, _ = cam.world_rays(X)
+    te = rc.cast_rays(rays, common_origin=True).t_hit
+    both = np.isfinite(te) & np.isfinite(tr.t)
+    assert (np.isfinite(te) == np.isfinite(tr.t)).mean() > 0.995
+    rel = np.abs(tr.t[both] - te[both]) / te[both]
+    assert np.median(rel) < 1e-3 and np.quantile(rel, 0.95) < 0.02
+    # the hill occludes: straight ahead the first hit is on it, well before the far edge
+    mid = (cam.height // 2) * cam.width + cam.width // 2
+    assert 6.0 < tr.t[mid] < 12.0
+
+
+def test_camera_below_the_surface_and_bad_options_raise():
+    hf = _bumpy(64)
+    pyr = DemPyramid.from_heightfield(hf)
+    z0 = float(pyr.height(0.0, 0.0)[0])
+    with pytest.raises(OutOfRangeError, match="inside the terrain"):
+        _trace(pyr, _cam(), _pose([0.0, 0.0, z0 - 0.01]))
+    with pytest.raises(OutOfRangeError, match="bin_factor"):
+        _trace(pyr, _cam(), _pose([0.0, 0.0, z0 + 1.0]), bin_factor=0.0)
+
+
+def test_reflectance_table_matches_the_exact_hapke_function():
+    f = functools.partial(
+        hapke_mod.blended_reflectance,
+        params=hapke_mod.HIGHLANDS_643NM,
+        start_deg=84.0,
+        end_deg=89.0,
+        dtype=np.float64,
+    )
+    lut = ReflectanceLUT.build(f, n_i=65, n_e=65, n_g=65)
+    p99, _ = lut.max_relative_error(f, samples=4000, min_cos=0.1)
+    assert p99 < 0.01
+    fine = ReflectanceLUT.build(f)
+    p99_fine, mx = fine.max_relative_error(f, samples=4000, min_cos=0.1)
+    assert p99_fine < 0.5 * p99 and mx < 0.05  # converges with the grid
+    # grid nodes are exact; the opposition surge survives tabulation
+    i = 10
+    ci = 1.0 - (i / 128.0) ** 2
+    assert float(fine(ci, ci, 0.0)) == pytest.approx(float(f(ci, ci, 0.0)), rel=1e-6)
+    assert float(fine(0.8, 0.8, 0.0)) > 1.2 * float(fine(0.8, 0.8, math.radians(20.0)))
+    assert float(fine(0.0, 0.5, 0.3)) == 0.0
+
+
+def _box(c, half):
+    v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    v = v * np.asarray(half) + np.asarray(c)
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
+    return DynamicMesh(v, f, albedo=0.4)
+
+
+def test_rover_pixel_mask_covers_every_mesh_hit_even_across_the_near_plane():
+    cam = _cam(80, 60)
+    X = _pose([0.0, 0.0, 1.0], tilt_deg=20.0)
+    boxes = [_box([1.5, 0.2, 0.6], [0.3, 0.3, 0.3]), _box([0.0, 0.0, 0.6], [0.4, 0.4, 0.2])]
+    rc = TerrainRaycaster()
+    rc.set_dynamic_meshes(boxes, [np.eye(4)] * 2)
+    rays, _ = cam.world_rays(X)
+    hit = np.isfinite(rc.cast_rays(rays).t_hit).reshape(cam.height, cam.width)
+    mask = rover_pixel_mask(boxes, [np.eye(4)] * 2, cam, X)
+    assert hit.any() and not (hit & ~mask).any()
+    assert mask.mean() < 0.8  # and it is not just the whole image
+    # a box straddling the camera plane (the camera sits inside its bounding sphere)
+    wide = [_box([0.0, 0.0, 0.8], [2.0, 2.0, 0.05])]
+    rc.set_dynamic_meshes(wide, [np.eye(4)])
+    hit = np.isfinite(rc.cast_rays(rays).t_hit).reshape(cam.height, cam.width)
+    mask = rover_pixel_mask(wide, [np.eye(4)], cam, X)
+    assert hit.any() and not (hit & ~mask).any()
+
+
+def _renderers(hf, meshes, w=128, h=96):
+    albedo = 0.12 + 0.06 * np.sin(np.arange(hf.shape[0] * hf.shape[1]) / 97.0)
+    albedo = albedo.reshape(hf.shape).astype(np.float32)
+    out = {}
+    for eng in ("heightfield", "raycast"):
+        model = CameraModel(width=w, height=h, fov_y_deg=50.0, engine=eng, near_radius_m=40.0)
+        out[eng] = TerrainCameraRenderer(
+            heightfield=hf, albedo=albedo, model=model, dynamic_meshes=meshes
+        )
+    return out
+
+
+def test_engines_agree_on_a_bumpy_site_with_a_rover_and_its_shadow():
+    hf = _bumpy()
+    box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
+    z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
+    X_box = np.eye(4)
+    X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
+    X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    rs = _renderers(hf, [box])
+    lm = RasterSampler.on_heightfield(
+        np.linspace(0.6, 1.0, hf.shape[1], dtype=np.float32)[None, :].repeat(hf.shape[0], 0),
+        hf,
+        outside=1.0,
+    )
+    imgs = {}
+    for eng, r in rs.items():
+        il, up = r.illumination(
+            sun_dir_W=(-0.6, 0.75, 0.28), earth_dir_W=(0.2, -0.3, 0.93), earth_phase=0.6
+        )
+        assert up
+        imgs[eng] = r.shade(X_WC=X, illumination=il, dynamic_poses=[X_box], lightmap=lm)
+    a, b = imgs["heightfield"], imgs["raycast"]
+    assert (a.label == 2).sum() > 200  # the rover box is in view
+    assert (a.label == b.label).mean() > 0.99
+    t = (a.label == 1) & (b.label == 1)
+    rel = np.abs(a.radiance[t] - b.radiance[t]) / np.maximum(b.radiance[t], 1e-4)
+    assert np.median(rel) < 0.01 and np.quantile(rel, 0.9) < 0.05
+    rv = (a.label == 2) & (b.label == 2)
+    np.testing.assert_allclose(a.radiance[rv].mean(), b.radiance[rv].mean(), rtol=0.02)
+    drel = np.abs(a.depth[t] - b.depth[t]) / b.depth[t]
+    assert np.quantile(drel, 0.99) < 0.02  # all but silhouette pixels
+    # the box casts a shadow on the terrain in both: compare with a render without it
+    r0 = _renderers(hf, [])["heightfield"]
+    il, _ = r0.illumination(
+        sun_dir_W=(-0.6, 0.75, 0.28), earth_dir_W=(0.2, -0.3, 0.93), earth_phase=0.6
+    )
+    c = r0.shade(X_WC=X, illumination=il, lightmap=lm)
+    darker = (a.label == 1) & (a.radiance < 0.5 * c.radiance)
+    assert darker.sum() > 50
+    ref_darker = (b.label == 1) & (b.radiance < 0.5 * c.radiance)
+    assert (darker == ref_darker).mean() > 0.99
+    # bit-identical on a second render
+    r = rs["heightfield"]
+    il, _ = r.illumination(
+        sun_dir_W=(-0.6, 0.75, 0.28), earth_dir_W=(0.2, -0.3, 0.93), earth_phase=0.6
+    )
+    again = r.shade(X_WC=X, illumination=il, dynamic_poses=[X_box], lightmap=lm)
+    assert again.radiance.tobytes() == a.radiance.tobytes()
+
+
+def test_engines_agree_under_spotlights_and_wheel_tracks():
+    from lunar_drake.render.shading import SpotLight
+
+    hf = _bumpy(128)
+    z = float(hf.height(np.array([-3.0]), np.array([0.0]))[0])
+    X = _pose([-3.0, 0.0, z + 1.5], tilt_deg=25.0)
+    spot = SpotLight(position_W=(-2.6, 0.0, z + 0.8), direction_W=(1.0, 0.0, -0.5), intensity=0.4)
+    depth = np.zeros(hf.shape, np.float32)
+    depth[:, 40:44] = 0.02  # a groove across the view
+    tracks = RasterSampler.on_heightfield(depth, hf, outside=0.0)
+    imgs = {}
+    for eng, r in _renderers(hf, []).items():
+        il, up = r.illumination(sun_dir_W=(0.3, 0.2, -0.2), spotlights=(spot,))
+        assert not up  # night: fill from the horizon, the spotlight does the rest
+        imgs[eng] = r.shade(X_WC=X, illumination=il, track_depth=tracks)
+    a, b = imgs["heightfield"], imgs["raycast"]
+    t = (a.label == 1) & (b.label == 1)
+    assert a.radiance[t].max() > 10 * np.median(a.radiance[t])  # the beam stands out
+    rel = np.abs(a.radiance[t] - b.radiance[t]) / np.maximum(b.radiance[t], 1e-5)
+    assert np.median(rel) < 0.02
