@@ -13,12 +13,17 @@ Method (per frame, compiled with numba, both cores):
    slope ``A_k = max_{j<=k} (Z(d_j) - z_cam) / d_j`` is stored.
 2. **Pixels.** A pixel's ray with horizontal direction ``u`` and slope ``s = d_z / |d_xy|``
    first meets the terrain where ``A_k >= s`` (a galloping search from the neighbouring
-   pixel's answer). The bracket ``[d_(k-1), d_k]`` is then re-evaluated on the pixel's
-   *own* azimuth (moved forward or back if the bin centre's answer does not bracket its
-   own ray) and refined by Illinois regula falsi on ``Z(p + d u) - (z_cam + s d)``.
+   pixel's answer). The crossing inside ``[d_(k-1), d_k]`` is found on the bin's centre
+   ray by linear interpolation between the two samples and the pixel's hit is taken at
+   that horizontal distance along its own ray; with ``iters > 0``
+   it is refined on the pixel's *own* azimuth (the bracket moved up to four samples
+   forward or back until it brackets the own ray) by Illinois regula falsi on
+   ``Z(p + d u) - (z_cam + s d)``.
 
 The result is the ray's intersection with the bilinear surface of the mip level used at
-that distance (level 0 within ``cell / pixel_angle`` of the camera). Approximations:
+that distance (level 0 within ``cell / pixel_angle`` of the camera) -- exact on planes
+along the bin's centre; elsewhere the depth error grows with the cross slope times the
+half-bin offset, amplified at grazing incidence (``iters`` removes it). Approximations:
 thin ridges narrower than a step are missed by the profile (as by any ray march);
 silhouettes are decided by the bin centre's profile, so an occluding edge can be off by
 up to half a bin (half a pixel by default) sideways. Terrain outside the DEM is sky.
