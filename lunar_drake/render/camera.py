@@ -336,11 +336,11 @@ class TerrainCameraRenderer:
         The shaded image is already in units of the solar irradiance at 1 au (the Sun's
         distance is applied in :meth:`illumination`), so it converts at 1 au here.
         """
-        L = sensor_mod.radiance_from_i_over_f(
-            np.maximum(shaded.radiance, 0.0), params=self.sensor, sun_distance_au=1.0
-        )
+        # L = (I/F) E_band / pi (sensor.radiance_from_i_over_f at 1 au), applied inside
+        # the sensor kernel: the same bytes without a float64 copy of the frame
         return sensor_mod.expose(
-            L,
+            np.maximum(shaded.radiance, np.float32(0.0)),
+            radiance_scale=self.sensor.band_solar_irradiance_W_m2 / math.pi,
             exposure_s=exposure_s,
             gain=gain,
             params=self.sensor,
