@@ -15,6 +15,7 @@ from lunar_drake.render.hapke_lut import ReflectanceLUT
 from lunar_drake.render.heightfield_trace import DemPyramid, trace_heightfield
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
 from lunar_drake.render.shading import RasterSampler
+from lunar_drake.render.shapes import box_mesh
 from lunar_drake.render.terrain_lod import TerrainLOD
 from lunar_drake.terrain.heightfield import Heightfield
 
@@ -143,25 +144,8 @@ def test_reflectance_table_matches_the_exact_hapke_function():
 
 
 def _box(c, half):
-    v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
-    v = v * np.asarray(half) + np.asarray(c)
-    f = np.array(
-        [
-            [0, 1, 3],
-            [0, 3, 2],
-            [4, 6, 7],
-            [4, 7, 5],
-            [0, 4, 5],
-            [0, 5, 1],
-            [2, 3, 7],
-            [2, 7, 6],
-            [0, 2, 6],
-            [0, 6, 4],
-            [1, 5, 7],
-            [1, 7, 3],
-        ]
-    )
-    return DynamicMesh(v, f, albedo=0.4)
+    v, f = box_mesh(*(2.0 * np.asarray(half, float)))
+    return DynamicMesh(v + np.asarray(c, float), f, albedo=0.4)
 
 
 def test_rover_pixel_mask_covers_every_mesh_hit_even_across_the_near_plane():
