@@ -269,6 +269,27 @@ def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: floa
     return mask.astype(bool)
 
 
+def _compact_gbuffer(camera, idx, pos, nrm, view, hits, *, dynamic: bool) -> GBuffer:
+    """A G-buffer of the pixels ``idx`` only (hits aligned with them), all rover
+    (``dynamic``) or all terrain, for the reference shading code."""
+    m = idx.size
+    return GBuffer(
+        width=camera.width,
+        height=camera.height,
+        index=idx,
+        position=pos,
+        normal=nrm,
+        view=view,
+        dynamic=np.full(m, dynamic),
+        terrain=np.full(m, not dynamic),
+        hits=hits,
+        label=np.zeros((1, 1), np.int16),
+        depth=np.zeros((1, 1), np.float32),
+        pixel_angle_rad=1.0 / max(camera.fx, camera.fy),
+        hits_compact=True,
+    )
+
+
 @dataclass(frozen=True)
 class FastTerrainEngine:
     """Per-site state of the fast engine (pyramid, samplers, LUT); frames via
@@ -445,22 +466,7 @@ class FastTerrainEngine:
         nrm = np.ascontiguousarray(hits.normals.T)
         flip = (nrm * d).sum(axis=0) > 0
         nrm[:, flip] *= np.float32(-1.0)
-        m = idx.size
-        gb = GBuffer(
-            width=camera.width,
-            height=camera.height,
-            index=idx,
-            position=pos,
-            normal=nrm,
-            view=-d,
-            dynamic=np.ones(m, bool),
-            terrain=np.zeros(m, bool),
-            hits=hits,
-            label=np.zeros((1, 1), np.int16),
-            depth=np.zeros((1, 1), np.float32),
-            pixel_angle_rad=1.0 / max(camera.fx, camera.fy),
-            hits_compact=True,
-        )
+        gb = _compact_gbuffer(camera, idx, pos, nrm, -d, hits, dynamic=True)
         out = shade(
             gb, raycaster, il, brdf=brdf, albedo=None, lightmap=lightmap, config=self.config
         )
@@ -478,26 +484,14 @@ class FastTerrainEngine:
         nz = np.sqrt(np.clip(1.0 - nx * nx - ny * ny, 1e-6, 1.0))
         nrm = np.stack([nx, ny, nz]).astype(np.float32)
         m = idx.size
-        gb = GBuffer(
-            width=camera.width,
-            height=camera.height,
-            index=idx,
-            position=pos,
-            normal=nrm,
-            view=-d,
-            dynamic=np.zeros(m, bool),
-            terrain=np.ones(m, bool),
-            hits=RayHits(
-                t_hit=t[idx],
-                geometry_id=np.zeros(m, np.uint32),
-                primitive_id=np.zeros(m, np.uint32),
-                primitive_uvs=np.zeros((m, 2), np.float32),
-                normals=nrm.T,
-            ),
-            label=np.zeros((1, 1), np.int16),
-            depth=np.zeros((1, 1), np.float32),
-            hits_compact=True,
+        hits = RayHits(
+            t_hit=t[idx],
+            geometry_id=np.zeros(m, np.uint32),
+            primitive_id=np.zeros(m, np.uint32),
+            primitive_uvs=np.zeros((m, 2), np.float32),
+            normals=nrm.T,
         )
+        gb = _compact_gbuffer(camera, idx, pos, nrm, -d, hits, dynamic=False)
         n_b = nrm
         if track_depth is not None:
             from lunar_drake.render.shading import _bumped
