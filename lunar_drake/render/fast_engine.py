@@ -126,6 +126,19 @@ def _tex3(a, p, x, y):
     return o0, o1, o2
 
 
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, accumulate):
+    """``out[j] (+)= irradiance * r`` of the distant light toward (lx, ly, lz) for the
+    row's pixels j < n (scalars, not an array: loads the stores could alias)."""
+    m = lut.shape[0] - 1
+    for j in range(n):
+        ci = NX[j] * lx + NY[j] * ly + NZ[j] * lz
+        cg = -(D0[j] * lx + D1[j] * ly + D2[j] * lz)
+        r = lut_reflectance_at(lut, lut_axis(ci, m), YE[j], cg)
+        r = irradiance * r if ci > 0.0 else 0.0
+        out[j] = out[j] + r if accumulate else r
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _shade_terrain(
     t, R, fx, fy, cx, cy, skip, width, height, cam,
@@ -133,73 +146,105 @@ def _shade_terrain(
     lma, lpar, use_lm, gxa, gya, gpar, use_bump,
     lut, ldirs, lirr, sun_light, sphere, sun_out, other_out, cand_out,
 ):  # fmt: skip
-    """Per pixel: sun term (before the rover shadow), other lights, rover-shadow cull."""
+    """Per pixel: sun term (before the rover shadow), other lights, rover-shadow cull.
+
+    Row by row in short passes over the row's terrain pixels (directions and positions,
+    surface texture, normals, one pass per light, lightmap, cull): each pass is a
+    simple loop the compiler schedules well, where one long per-pixel body stalled."""
     nl = ldirs.shape[0]
+    m_e = lut.shape[1] - 1
     for row in numba.prange(height):
+        col_of = np.empty(width, np.int64)
+        D0 = np.empty(width)
+        D1 = np.empty(width)
+        D2 = np.empty(width)
+        X = np.empty(width)
+        Y = np.empty(width)
+        Z = np.empty(width)
+        NX = np.empty(width)
+        NY = np.empty(width)
+        NZ = np.empty(width)
+        AF = np.empty(width)
+        YE = np.empty(width)
+        SUN = np.zeros(width)
+        OTH = np.zeros(width)
+        base = row * width
+        n = 0
         for col in range(width):
-            i = row * width + col
+            i = base + col
             sun_out[i] = 0.0
             other_out[i] = 0.0
             cand_out[i] = 0
-            ti = t[i]
-            if not (ti < np.inf) or skip[i]:
-                continue
+            if t[i] < np.inf and skip[i] == 0:
+                col_of[n] = col
+                n += 1
+        for j in range(n):  # directions and hit points
+            col = col_of[j]
             d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, col)
-            x = cam[0] + ti * d0
-            y = cam[1] + ti * d1
-            z = cam[2] + ti * d2
-            nx, ny, alb = _tex3(surf, spar, x, y)
-            q = 1.0 - nx * nx - ny * ny
-            nz = math.sqrt(min(max(q, 1e-6), 1.0))
-            if use_bump and nz > 1e-3:
-                bx = nx / nz + _tex(gxa, gpar, x, y)
-                by = ny / nz + _tex(gya, gpar, x, y)
-                inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
-                nx = bx * inv
-                ny = by * inv
-                nz = inv
-            ce = -(nx * d0 + ny * d1 + nz * d2)
-            if ce < 0.0:
-                ce = 0.0
-            ye = lut_axis(ce, lut.shape[1] - 1)
-            afac = alb * afac_scale
-            sun = 0.0
-            other = 0.0
-            for k in range(nl):
-                lx = ldirs[k, 0]
-                ly = ldirs[k, 1]
-                lz = ldirs[k, 2]
-                ci = nx * lx + ny * ly + nz * lz
-                if ci <= 0.0:
-                    continue
-                cg = -(d0 * lx + d1 * ly + d2 * lz)
-                r = lut_reflectance_at(lut, lut_axis(ci, lut.shape[0] - 1), ye, cg)
-                r *= afac * lirr[k]
-                if k == sun_light:
-                    if use_lm:
-                        lm = _tex(lma, lpar, x, y)
-                        lm = min(max(lm, 0.0), 1.0)
-                        r *= lm
-                        if lm <= 0.0:
-                            continue
-                    sun += r
-                    if sphere[4] > 0.0:
-                        # rover-shadow candidates: the Sun ray from p (offset along the
-                        # geometric normal) passes the rover's sphere within the disk
-                        qx = x - sphere[0]
-                        qy = y - sphere[1]
-                        qz = z - sphere[2]
-                        tp = -(qx * lx + qy * ly + qz * lz)
-                        qq = qx * qx + qy * qy + qz * qz
-                        reach = (max(tp, 0.0) + sphere[3]) * sphere[5] + sphere[3] + sphere[6]
-                        if tp > -sphere[3] - sphere[6] and qq - tp * tp <= (
-                            reach * reach + 1e-5 * qq + 1e-6
-                        ):
-                            cand_out[i] = 1
-                else:
-                    other += r
-            sun_out[i] = sun * math.pi
-            other_out[i] = other * math.pi
+            ti = t[base + col]
+            D0[j] = d0
+            D1[j] = d1
+            D2[j] = d2
+            X[j] = cam[0] + ti * d0
+            Y[j] = cam[1] + ti * d1
+            Z[j] = cam[2] + ti * d2
+        for j in range(n):  # normal map and albedo
+            nx, ny, alb = _tex3(surf, spar, X[j], Y[j])
+            NX[j] = nx
+            NY[j] = ny
+            AF[j] = alb * afac_scale
+        if use_bump:
+            for j in range(n):
+                nx = NX[j]
+                ny = NY[j]
+                nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
+                if nz > 1e-3:
+                    bx = nx / nz + _tex(gxa, gpar, X[j], Y[j])
+                    by = ny / nz + _tex(gya, gpar, X[j], Y[j])
+                    inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
+                    NX[j] = bx * inv
+                    NY[j] = by * inv
+        for j in range(n):  # nz and the emission axis of the table
+            nx = NX[j]
+            ny = NY[j]
+            nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
+            NZ[j] = nz
+            YE[j] = lut_axis(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), m_e)
+        for k in range(nl):
+            lx = ldirs[k, 0]
+            ly = ldirs[k, 1]
+            lz = ldirs[k, 2]
+            if k == sun_light:
+                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, lirr[k], SUN, False)
+            else:
+                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, lirr[k], OTH, True)
+        if sun_light >= 0 and use_lm:
+            for j in range(n):
+                SUN[j] *= min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0)
+        if sun_light >= 0 and sphere[4] > 0.0:
+            # rover-shadow candidates: the Sun ray from p (offset along the geometric
+            # normal) passes the rover's sphere within the disk
+            lx = ldirs[sun_light, 0]
+            ly = ldirs[sun_light, 1]
+            lz = ldirs[sun_light, 2]
+            rad = sphere[3]
+            for j in range(n):
+                qx = X[j] - sphere[0]
+                qy = Y[j] - sphere[1]
+                qz = Z[j] - sphere[2]
+                tp = -(qx * lx + qy * ly + qz * lz)
+                qq = qx * qx + qy * qy + qz * qz
+                reach = (max(tp, 0.0) + rad) * sphere[5] + rad + sphere[6]
+                if (
+                    SUN[j] > 0.0
+                    and tp > -rad - sphere[6]
+                    and qq - tp * tp <= reach * reach + 1e-5 * qq + 1e-6
+                ):
+                    cand_out[base + col_of[j]] = 1
+        for j in range(n):
+            i = base + col_of[j]
+            sun_out[i] = SUN[j] * AF[j] * math.pi
+            other_out[i] = OTH[j] * AF[j] * math.pi
 
 
 def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: float = 1e-3):
