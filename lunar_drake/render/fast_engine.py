@@ -145,8 +145,10 @@ def _shade_terrain(
     surf, spar, afac_scale,
     lma, lpar, use_lm, gxa, gya, gpar, use_bump,
     lut, ldirs, lirr, sun_light, sphere, sun_out, other_out, cand_out,
+    rad_out, depth_out, label_out,
 ):  # fmt: skip
-    """Per pixel: sun term (before the rover shadow), other lights, rover-shadow cull.
+    """Per pixel: sun term (before the rover shadow), other lights, their sum, rover-shadow
+    cull, camera-z depth and label (1 terrain, 0 sky or ``skip``).
 
     Row by row in short passes over the row's terrain pixels (directions and positions,
     surface texture, normals, one pass per light, lightmap, cull): each pass is a
@@ -174,7 +176,10 @@ def _shade_terrain(
             i = base + col
             sun_out[i] = 0.0
             other_out[i] = 0.0
+            rad_out[i] = 0.0
             cand_out[i] = 0
+            label_out[i] = 0
+            depth_out[i] = np.inf
             if t[i] < np.inf and skip[i] == 0:
                 col_of[n] = col
                 n += 1
@@ -243,8 +248,30 @@ def _shade_terrain(
                     cand_out[base + col_of[j]] = 1
         for j in range(n):
             i = base + col_of[j]
-            sun_out[i] = SUN[j] * AF[j] * math.pi
-            other_out[i] = OTH[j] * AF[j] * math.pi
+            sun_i = np.float32(SUN[j] * AF[j] * math.pi)
+            other_i = np.float32(OTH[j] * AF[j] * math.pi)
+            sun_out[i] = sun_i
+            other_out[i] = other_i
+            rad_out[i] = sun_i + other_i
+            label_out[i] = 1
+            xc = (col_of[j] - cx) / fx
+            yc = (row - cy) / fy
+            depth_out[i] = t[i] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
+
+
+def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.0):
+    """(F,) bool: triangles (F, 3, 3) in C not wholly outside one face of the view
+    frustum (the image grown by ``margin_px``, and the near plane): a half-space through
+    the camera centre per image side, so the test holds for any depth sign."""
+    x, y, z = tri[..., 0], tri[..., 1], tri[..., 2]
+    w, h = camera.width - 1.0, camera.height - 1.0
+    m = margin_px
+    out = (z < near_m).all(axis=1)
+    out |= (camera.fx * x + (camera.cx + m) * z < 0.0).all(axis=1)  # u < -m
+    out |= (camera.fx * x - (w + m - camera.cx) * z > 0.0).all(axis=1)  # u > w + m
+    out |= (camera.fy * y + (camera.cy + m) * z < 0.0).all(axis=1)
+    out |= (camera.fy * y - (h + m - camera.cy) * z > 0.0).all(axis=1)
+    return ~out
 
 
 def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: float = 1e-3):
@@ -268,6 +295,7 @@ def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: floa
         v_W = m.vertices @ Xg[:3, :3].T + Xg[:3, 3]
         v_C = (v_W - p_WC) @ R_CW.T
         tri = v_C[m.faces]  # (F, 3, 3)
+        tri = tri[_in_frustum(tri, camera, near_m)]
         front = tri[:, :, 2] >= near_m
         nfront = front.sum(axis=1)
         full = tri[nfront == 3]
@@ -453,11 +481,15 @@ class FastTerrainEngine:
         sun_t = np.empty(n, np.float32)
         other_t = np.empty(n, np.float32)
         cand = np.empty(n, np.uint8)
+        rad = np.empty(n, np.float32)
+        depth = np.empty(n, np.float32)
+        label = np.empty(n, np.int16)
         _shade_terrain(
             t, R, camera.fx, camera.fy, camera.cx, camera.cy, skip, W, H, cam,
             self.surface, self.surface_params, 1.0 / self.config.albedo_reference,
             lma, lpar, lightmap is not None, gxa, gya, gpar, track_depth is not None,
             self.lut.table, ldirs_a, lirr_a, sun_light, sphere, sun_t, other_t, cand,
+            rad, depth, label,
         )  # fmt: skip
 
         # soft rover shadow on the candidate terrain pixels
@@ -481,27 +513,18 @@ class FastTerrainEngine:
                 pixel_footprint_m=tc * np.float32(1.0 / max(camera.fx, camera.fy)),
                 max_penumbra_px=int(self.config.max_penumbra_px),
             )
-            sun_t[ci] *= f
-        rad = sun_t
-        rad += other_t
+            rad[ci] = sun_t[ci] * f + other_t[ci]
 
-        terrain = np.isfinite(t)
-        terrain[rover_idx] = False
         if il.spotlights:
-            self._spotlights(rad, terrain, t, tr, cam, camera, il, raycaster, track_depth)
-
-        label = np.zeros(n, np.int16)
-        label[terrain] = 1
-        depth_t = np.where(terrain, t, np.float32(np.inf)).astype(np.float32)
+            self._spotlights(rad, label == 1, t, tr, cam, camera, il, raycaster, track_depth)
         if rover_idx.size:
             lab, _, _ = raycaster.classify(rover_hits.geometry_id, rover_hits.primitive_id)
             label[rover_idx] = lab
-            depth_t[rover_idx] = rover_hits.t_hit
+            d_C = camera_ray_directions(W, H, camera.fx, camera.fy, camera.cx, camera.cy)
+            depth[rover_idx] = rover_hits.t_hit * d_C[2, rover_idx]
             rad[rover_idx] = self._shade_rover(
                 rover_idx, rover_hits, tr, cam, camera, il, raycaster, brdf, lightmap
             )
-        d_C = camera_ray_directions(W, H, camera.fx, camera.fy, camera.cx, camera.cy)
-        depth = depth_t * d_C[2]
         return ShadedImage(rad.reshape(H, W), depth.reshape(H, W), label.reshape(H, W))
 
     # ------------------------------------------------------------------------------------
