@@ -11,7 +11,13 @@ from lunar_drake.errors import OutOfRangeError
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
 from lunar_drake.render.fast_engine import rover_pixel_mask
-from lunar_drake.render.hapke_lut import ReflectanceLUT
+from lunar_drake.render.hapke_lut import (
+    ReflectanceLUT,
+    lut_axis,
+    lut_axis_f32,
+    lut_reflectance_at,
+    lut_reflectance_at_f32,
+)
 from lunar_drake.render.heightfield_trace import DemPyramid, trace_heightfield
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
 from lunar_drake.render.shading import RasterSampler
@@ -141,6 +147,43 @@ def test_reflectance_table_matches_the_exact_hapke_function():
     assert float(fine(ci, ci, 0.0)) == pytest.approx(float(f(ci, ci, 0.0)), rel=1e-6)
     assert float(fine(0.8, 0.8, 0.0)) > 1.2 * float(fine(0.8, 0.8, math.radians(20.0)))
     assert float(fine(0.0, 0.5, 0.3)) == 0.0
+
+
+def test_float32_table_reads_match_the_float64_ones():
+    """The shading kernel's float32 lookups agree with the float64 lookups; cos_i <= 0
+    reads the zero row exactly (the kernel relies on it instead of a branch)."""
+    import numba
+
+    f = functools.partial(
+        hapke_mod.blended_reflectance,
+        params=hapke_mod.HIGHLANDS_643NM,
+        start_deg=84.0,
+        end_deg=89.0,
+        dtype=np.float64,
+    )
+    lut = ReflectanceLUT.build(f, n_i=33, n_e=33, n_g=33)
+
+    @numba.njit
+    def both(table, ci, ce, cg, out64, out32):
+        m = table.shape[0] - 1
+        for k in range(ci.size):
+            x, y = lut_axis(ci[k], m), lut_axis(ce[k], m)
+            out64[k] = lut_reflectance_at(table, x, y, cg[k])
+            x32 = lut_axis_f32(np.float32(ci[k]), np.float32(m))
+            y32 = np.float32(y)
+            out32[k] = lut_reflectance_at_f32(table, x32, y32, np.float32(cg[k]))
+
+    rng = np.random.default_rng(3)
+    n = 20000
+    ci = rng.uniform(-0.3, 1.0, n)
+    ce = rng.uniform(0.05, 1.0, n)
+    cg = rng.uniform(-1.0, 1.0, n)
+    o64, o32 = np.empty(n), np.empty(n, np.float32)
+    both(lut.table, ci, ce, cg, o64, o32)
+    lit = ci > 0.05
+    rel = np.abs(o32[lit] - o64[lit]) / np.maximum(o64[lit], 1e-12)
+    assert np.quantile(rel, 0.99) < 1e-5 and rel.max() < 1e-3
+    assert (o32[ci <= 0.0] == 0.0).all() and (o64[ci <= 0.0] == 0.0).all()
 
 
 def _box(c, half):

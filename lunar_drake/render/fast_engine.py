@@ -30,7 +30,12 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
-from lunar_drake.render.hapke_lut import ReflectanceLUT, lut_axis, lut_reflectance_at
+from lunar_drake.render.hapke_lut import (
+    ReflectanceLUT,
+    lut_axis,
+    lut_axis_f32,
+    lut_reflectance_at_f32,
+)
 from lunar_drake.render.heightfield_trace import DemPyramid, pixel_direction, trace_heightfield
 from lunar_drake.render.raycast import (
     INVALID_ID,
@@ -129,13 +134,14 @@ def _tex3(a, p, x, y):
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, accumulate):
     """``out[j] (+)= irradiance * r`` of the distant light toward (lx, ly, lz) for the
-    row's pixels j < n (scalars, not an array: loads the stores could alias)."""
-    m = lut.shape[0] - 1
+    row's pixels j < n, all float32 (vector code; the light is passed as scalars, not
+    an array whose loads the stores could alias)."""
+    m = np.float32(lut.shape[0] - 1)
     for j in range(n):
         ci = NX[j] * lx + NY[j] * ly + NZ[j] * lz
         cg = -(D0[j] * lx + D1[j] * ly + D2[j] * lz)
-        r = lut_reflectance_at(lut, lut_axis(ci, m), YE[j], cg)
-        r = irradiance * r if ci > 0.0 else 0.0
+        # ci <= 0 reads the table's last i row, which is 0: no light, no branch
+        r = irradiance * lut_reflectance_at_f32(lut, lut_axis_f32(ci, m), YE[j], cg)
         out[j] = out[j] + r if accumulate else r
 
 
@@ -157,19 +163,19 @@ def _shade_terrain(
     m_e = lut.shape[1] - 1
     for row in numba.prange(height):
         col_of = np.empty(width, np.int64)
-        D0 = np.empty(width)
-        D1 = np.empty(width)
-        D2 = np.empty(width)
+        D0 = np.empty(width, np.float32)
+        D1 = np.empty(width, np.float32)
+        D2 = np.empty(width, np.float32)
         X = np.empty(width)
         Y = np.empty(width)
         Z = np.empty(width)
-        NX = np.empty(width)
-        NY = np.empty(width)
-        NZ = np.empty(width)
-        AF = np.empty(width)
-        YE = np.empty(width)
-        SUN = np.zeros(width)
-        OTH = np.zeros(width)
+        NX = np.empty(width, np.float32)
+        NY = np.empty(width, np.float32)
+        NZ = np.empty(width, np.float32)
+        AF = np.empty(width, np.float32)
+        YE = np.empty(width, np.float32)
+        SUN = np.zeros(width, np.float32)
+        OTH = np.zeros(width, np.float32)
         base = row * width
         n = 0
         for col in range(width):
@@ -216,16 +222,17 @@ def _shade_terrain(
             NZ[j] = nz
             YE[j] = lut_axis(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), m_e)
         for k in range(nl):
-            lx = ldirs[k, 0]
-            ly = ldirs[k, 1]
-            lz = ldirs[k, 2]
+            lx = np.float32(ldirs[k, 0])
+            ly = np.float32(ldirs[k, 1])
+            lz = np.float32(ldirs[k, 2])
+            e = np.float32(lirr[k])
             if k == sun_light:
-                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, lirr[k], SUN, False)
+                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, SUN, False)
             else:
-                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, lirr[k], OTH, True)
+                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, OTH, True)
         if sun_light >= 0 and use_lm:
             for j in range(n):
-                SUN[j] *= min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0)
+                SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
         if sun_light >= 0 and sphere[4] > 0.0:
             # rover-shadow candidates: the Sun ray from p (offset along the geometric
             # normal) passes the rover's sphere within the disk

@@ -22,7 +22,14 @@ import numpy as np
 
 from lunar_drake.errors import OutOfRangeError
 
-__all__ = ["ReflectanceLUT", "lut_axis", "lut_reflectance", "lut_reflectance_at"]
+__all__ = [
+    "ReflectanceLUT",
+    "lut_axis",
+    "lut_axis_f32",
+    "lut_reflectance",
+    "lut_reflectance_at",
+    "lut_reflectance_at_f32",
+]
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -45,6 +52,42 @@ def lut_reflectance_at(table, x, y, cg):
     fx = x - i0
     fy = y - j0
     fz = z - k0
+    c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
+    c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
+    c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
+    c11 = table[i0 + 1, j0 + 1, k0] + fz * (
+        table[i0 + 1, j0 + 1, k0 + 1] - table[i0 + 1, j0 + 1, k0]
+    )
+    c0 = c00 + fy * (c01 - c00)
+    c1 = c10 + fy * (c11 - c10)
+    return c0 + fx * (c1 - c0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def lut_axis_f32(c, n):
+    """:func:`lut_axis` in float32 (``c`` float32, ``n`` the float32 grid size)."""
+    one = np.float32(1.0)
+    return np.float32(math.sqrt(one - min(max(c, np.float32(0.0)), one))) * n
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def lut_reflectance_at_f32(table, x, y, cg):
+    """:func:`lut_reflectance_at` in float32 arithmetic (``x``, ``y``, ``cg`` float32):
+    the form a compiled loop vectorizes eight pixels wide, table reads included (results
+    within ~1e-6 relative of the float64 form)."""
+    ni = table.shape[0] - 1
+    ne = table.shape[1] - 1
+    ng = table.shape[2] - 1
+    one = np.float32(1.0)
+    h = np.float32(0.5) * (one - cg)
+    h = min(max(h, np.float32(0.0)), one)
+    z = np.float32(math.sqrt(np.float32(math.sqrt(h)))) * np.float32(ng)
+    i0 = min(int(x), ni - 1)
+    j0 = min(int(y), ne - 1)
+    k0 = min(int(z), ng - 1)
+    fx = x - np.float32(i0)
+    fy = y - np.float32(j0)
+    fz = z - np.float32(k0)
     c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
     c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
     c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
