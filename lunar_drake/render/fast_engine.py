@@ -32,7 +32,6 @@ import numpy as np
 
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
-    lut_axis,
     lut_axis_f32,
     lut_reflectance_at_f32,
 )
@@ -107,8 +106,8 @@ def _tex(a, p, x, y):
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _tex3(a, p, x, y):
-    """Bilinear sample of the first three channels of an (h, w, 4) texture (as
-    :func:`_tex`, edge clamped)."""
+    """Bilinear sample of the first three channels of an (h, w, 4) float32 texture (as
+    :func:`_tex`, edge clamped; cell position in float64, weights and sum in float32)."""
     h = a.shape[0]
     w = a.shape[1]
     col = (x - p[2]) * p[0] - 0.5
@@ -119,11 +118,12 @@ def _tex3(a, p, x, y):
     r0 = min(int(row), max(h - 2, 0))
     c1 = min(c0 + 1, w - 1)
     r1 = min(r0 + 1, h - 1)
-    fc = col - c0
-    fr = row - r0
-    w00 = (1.0 - fr) * (1.0 - fc)
-    w01 = (1.0 - fr) * fc
-    w10 = fr * (1.0 - fc)
+    fc = np.float32(col - c0)
+    fr = np.float32(row - r0)
+    one = np.float32(1.0)
+    w00 = (one - fr) * (one - fc)
+    w01 = (one - fr) * fc
+    w10 = fr * (one - fc)
     w11 = fr * fc
     o0 = w00 * a[r0, c0, 0] + w01 * a[r0, c1, 0] + w10 * a[r1, c0, 0] + w11 * a[r1, c1, 0]
     o1 = w00 * a[r0, c0, 1] + w01 * a[r0, c1, 1] + w10 * a[r1, c0, 1] + w11 * a[r1, c1, 1]
@@ -203,7 +203,7 @@ def _shade_terrain(
             nx, ny, alb = _tex3(surf, spar, X[j], Y[j])
             NX[j] = nx
             NY[j] = ny
-            AF[j] = alb * afac_scale
+            AF[j] = alb * np.float32(afac_scale)
         if use_bump:
             for j in range(n):
                 nx = NX[j]
@@ -218,9 +218,10 @@ def _shade_terrain(
         for j in range(n):  # nz and the emission axis of the table
             nx = NX[j]
             ny = NY[j]
-            nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
+            one = np.float32(1.0)
+            nz = np.float32(math.sqrt(min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)))
             NZ[j] = nz
-            YE[j] = lut_axis(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), m_e)
+            YE[j] = lut_axis_f32(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(m_e))
         for k in range(nl):
             lx = np.float32(ldirs[k, 0])
             ly = np.float32(ldirs[k, 1])
