@@ -127,14 +127,19 @@ def test_camera_below_the_surface_and_bad_options_raise():
         _trace(pyr, _cam(), _pose([0.0, 0.0, z0 + 1.0]), bin_factor=0.0)
 
 
-def test_reflectance_table_matches_the_exact_hapke_function():
-    f = functools.partial(
+def _highlands_reflectance():
+    """The exact blended Hapke/Lunar-Lambert reflectance the tables are built from."""
+    return functools.partial(
         hapke_mod.blended_reflectance,
         params=hapke_mod.HIGHLANDS_643NM,
         start_deg=84.0,
         end_deg=89.0,
         dtype=np.float64,
     )
+
+
+def test_reflectance_table_matches_the_exact_hapke_function():
+    f = _highlands_reflectance()
     lut = ReflectanceLUT.build(f, n_i=65, n_e=65, n_g=65)
     p99, _ = lut.max_relative_error(f, samples=4000, min_cos=0.1)
     assert p99 < 0.01
@@ -154,13 +159,7 @@ def test_float32_table_reads_match_the_float64_ones():
     reads the zero row exactly (the kernel relies on it instead of a branch)."""
     import numba
 
-    f = functools.partial(
-        hapke_mod.blended_reflectance,
-        params=hapke_mod.HIGHLANDS_643NM,
-        start_deg=84.0,
-        end_deg=89.0,
-        dtype=np.float64,
-    )
+    f = _highlands_reflectance()
     lut = ReflectanceLUT.build(f, n_i=33, n_e=33, n_g=33)
 
     @numba.njit

@@ -39,6 +39,21 @@ def lut_axis(c, n):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
+def _trilinear(table, i0, j0, k0, fx, fy, fz):
+    """Trilinear blend of the cell at (i0, j0, k0) with fractions fx, fy, fz (the
+    arithmetic is in the fractions' float type)."""
+    c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
+    c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
+    c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
+    c11 = table[i0 + 1, j0 + 1, k0] + fz * (
+        table[i0 + 1, j0 + 1, k0 + 1] - table[i0 + 1, j0 + 1, k0]
+    )
+    c0 = c00 + fy * (c01 - c00)
+    c1 = c10 + fy * (c11 - c10)
+    return c0 + fx * (c1 - c0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
 def lut_reflectance_at(table, x, y, cg):
     """Trilinear ``r`` at grid coordinates x (cos_i axis), y (cos_e axis) and cos_g."""
     ni = table.shape[0] - 1
@@ -52,15 +67,7 @@ def lut_reflectance_at(table, x, y, cg):
     fx = x - i0
     fy = y - j0
     fz = z - k0
-    c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
-    c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
-    c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
-    c11 = table[i0 + 1, j0 + 1, k0] + fz * (
-        table[i0 + 1, j0 + 1, k0 + 1] - table[i0 + 1, j0 + 1, k0]
-    )
-    c0 = c00 + fy * (c01 - c00)
-    c1 = c10 + fy * (c11 - c10)
-    return c0 + fx * (c1 - c0)
+    return _trilinear(table, i0, j0, k0, fx, fy, fz)
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -88,15 +95,7 @@ def lut_reflectance_at_f32(table, x, y, cg):
     fx = x - np.float32(i0)
     fy = y - np.float32(j0)
     fz = z - np.float32(k0)
-    c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
-    c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
-    c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
-    c11 = table[i0 + 1, j0 + 1, k0] + fz * (
-        table[i0 + 1, j0 + 1, k0 + 1] - table[i0 + 1, j0 + 1, k0]
-    )
-    c0 = c00 + fy * (c01 - c00)
-    c1 = c10 + fy * (c11 - c10)
-    return c0 + fx * (c1 - c0)
+    return _trilinear(table, i0, j0, k0, fx, fy, fz)
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")

@@ -338,8 +338,9 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
 
 
 @numba.njit(cache=True, inline="always")
-def _ray_gap(data, offs, hs, ws, cxs, cys, left, top, lev, px, py, pz, ux, uy, s, d):
-    """Terrain height minus ray height at horizontal distance d (m)."""
+def _ray_gap(packed, lev, px, py, pz, ux, uy, s, d):
+    """Terrain height of mip level ``lev`` minus ray height at horizontal distance d (m)."""
+    data, offs, hs, ws, cxs, cys, left, top = packed
     z = _bilinear(
         data, offs[lev], hs[lev], ws[lev], cxs[lev], cys[lev], left, top, px + d * ux, py + d * uy
     )
@@ -360,16 +361,9 @@ def _pixels(
         UY = np.empty(width)
         BIN = np.empty(width, np.int64)
         KK = np.empty(width, np.int64)
-        yc = (r - cy) / fy
         # pass 1: ray slope, horizontal direction and azimuth bin (branch-free)
         for c in range(width):
-            xc = (c - cx) / fx
-            inv = 1.0 / math.sqrt(xc * xc + yc * yc + 1.0)
-            a_ = xc * inv
-            b_ = yc * inv
-            dx = R[0, 0] * a_ + R[0, 1] * b_ + R[0, 2] * inv
-            dy = R[1, 0] * a_ + R[1, 1] * b_ + R[1, 2] * inv
-            dz = R[2, 0] * a_ + R[2, 1] * b_ + R[2, 2] * inv
+            dx, dy, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
             rho = math.sqrt(dx * dx + dy * dy)
             rr = 1.0 / max(rho, 1e-30)
             S[c] = dz * rr
@@ -439,11 +433,10 @@ def _pixels(
             lev_out[i] = -1
             rho = RHO[c]
             if rho < 1e-7:
-                dz = R[2, 0] * ((c - cx) / fx) + R[2, 1] * yc + R[2, 2]
+                _, _, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
                 if dz < 0.0:  # straight down
                     z = _bilinear(data, offs[0], hs[0], ws[0], cxs[0], cys[0], left, top, px, py)
-                    nrm = math.sqrt(((c - cx) / fx) ** 2 + yc * yc + 1.0)
-                    t_out[i] = (pz - z) * nrm / -dz
+                    t_out[i] = (pz - z) / -dz
                     lev_out[i] = 0
                 continue
             k = KK[c]
@@ -476,12 +469,8 @@ def _pixels(
                 ubx = ux
                 uby = uy
                 lev = lv[k]
-                g_lo = _ray_gap(
-                    data, offs, hs, ws, cxs, cys, left, top, lev, px, py, pz, ubx, uby, s, d_lo
-                )
-                g_hi = _ray_gap(
-                    data, offs, hs, ws, cxs, cys, left, top, lev, px, py, pz, ubx, uby, s, d_hi
-                )
+                g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
+                g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
                 # a few samples forward or back until the own ray is bracketed
                 kh = k
                 kl = k - 1
@@ -492,72 +481,21 @@ def _pixels(
                         d_lo = d_hi
                         g_lo = g_hi
                         d_hi = ds[kh]
-                        g_hi = _ray_gap(
-                            data,
-                            offs,
-                            hs,
-                            ws,
-                            cxs,
-                            cys,
-                            left,
-                            top,
-                            lev,
-                            px,
-                            py,
-                            pz,
-                            ubx,
-                            uby,
-                            s,
-                            d_hi,
-                        )
+                        g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
                     elif g_lo >= 0.0 and kl > 0:
                         kh -= 1
                         kl -= 1
                         d_hi = d_lo
                         g_hi = g_lo
                         d_lo = ds[kl]
-                        g_lo = _ray_gap(
-                            data,
-                            offs,
-                            hs,
-                            ws,
-                            cxs,
-                            cys,
-                            left,
-                            top,
-                            lev,
-                            px,
-                            py,
-                            pz,
-                            ubx,
-                            uby,
-                            s,
-                            d_lo,
-                        )
+                        g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
                     else:
                         break
                 if g_lo < 0.0 <= g_hi:
                     side = 0
                     for _ in range(iters):
                         dm = (d_lo * g_hi - d_hi * g_lo) / (g_hi - g_lo)
-                        gm = _ray_gap(
-                            data,
-                            offs,
-                            hs,
-                            ws,
-                            cxs,
-                            cys,
-                            left,
-                            top,
-                            lev,
-                            px,
-                            py,
-                            pz,
-                            ubx,
-                            uby,
-                            s,
-                            dm,
-                        )
+                        gm = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, dm)
                         if gm >= 0.0:
                             d_hi = dm
                             g_hi = gm
