@@ -347,6 +347,19 @@ def _ray_gap(packed, lev, px, py, pz, ux, uy, s, d):
     return z - (pz + s * d)
 
 
+@numba.njit(cache=True, inline="always")
+def _bisect_first(AZ, b, s, lo, hi):
+    """The first k in (lo, hi] with ``AZ[k, b, 0] >= s``, given ``AZ[lo] < s <= AZ[hi]``
+    (the profile is non-decreasing)."""
+    while hi - lo > 1:
+        m = (lo + hi) // 2
+        if AZ[m, b, 0] >= s:
+            hi = m
+        else:
+            lo = m
+    return hi
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _pixels(
     packed, R, px, py, pz, fx, fy, cx, cy, width, height,
@@ -398,15 +411,7 @@ def _pixels(
                             lo = nxt
                             step *= 2
                         else:
-                            a_ = nxt
-                            b_ = lo
-                            while b_ - a_ > 1:
-                                m = (a_ + b_) // 2
-                                if AZ[m, b, 0] >= s:
-                                    b_ = m
-                                else:
-                                    a_ = m
-                            lo = b_
+                            lo = _bisect_first(AZ, b, s, nxt, lo)
                             break
                     k = lo
             else:
@@ -417,13 +422,7 @@ def _pixels(
                     a_ = b_
                     step *= 2
                     b_ = min(b_ + step, ke - 1)
-                while b_ - a_ > 1:
-                    m = (a_ + b_) // 2
-                    if AZ[m, b, 0] >= s:
-                        b_ = m
-                    else:
-                        a_ = m
-                k = b_
+                k = _bisect_first(AZ, b, s, a_, b_)
             kprev = k
             KK[c] = k
         # pass 3: the crossing between samples k - 1 and k
