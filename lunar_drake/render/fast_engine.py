@@ -132,8 +132,8 @@ def _tex3(a, p, x, y):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, accumulate):
-    """``out[j] (+)= irradiance * r`` of the distant light toward (lx, ly, lz) for the
+def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out):
+    """``out[j] = irradiance * r`` of the distant light toward (lx, ly, lz) for the
     row's pixels j < n, all float32 (vector code; the light is passed as scalars, not
     an array whose loads the stores could alias)."""
     m = np.float32(lut.shape[0] - 1)
@@ -142,7 +142,7 @@ def _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, 
         cg = -(D0[j] * lx + D1[j] * ly + D2[j] * lz)
         # ci <= 0 reads the table's last i row, which is 0: no light, no branch
         r = irradiance * lut_reflectance_at_f32(lut, lut_axis_f32(ci, m), YE[j], cg)
-        out[j] = out[j] + r if accumulate else r
+        out[j] = r
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
@@ -176,6 +176,7 @@ def _shade_terrain(
         YE = np.empty(width, np.float32)
         SUN = np.zeros(width, np.float32)
         OTH = np.zeros(width, np.float32)
+        TMP = np.empty(width, np.float32)
         base = row * width
         n = 0
         for col in range(width):
@@ -227,10 +228,15 @@ def _shade_terrain(
             ly = np.float32(ldirs[k, 1])
             lz = np.float32(ldirs[k, 2])
             e = np.float32(lirr[k])
+            # one call site for all lights: LLVM vectorized only one of two inlined
+            # copies, and the other ran scalar (3.5x slower per light, measured)
+            _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, TMP)
             if k == sun_light:
-                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, SUN, False)
+                for j in range(n):
+                    SUN[j] = TMP[j]
             else:
-                _add_light(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, OTH, True)
+                for j in range(n):
+                    OTH[j] += TMP[j]
         if sun_light >= 0 and use_lm:
             for j in range(n):
                 SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
