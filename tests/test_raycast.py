@@ -307,6 +307,16 @@ def test_dynamic_box_occludes_terrain_and_moves():
     assert rc.occlusion(pts, up, max_t=np.array([1.0, 0.4])).tolist() == [False, False]
     with pytest.raises(ConfigError):
         rc.set_dynamic_poses([])
+    # the same pose again keeps the dynamic BVH; a changed one rebuilds it
+    n = rc.dynamic_rebuilds
+    rc.set_dynamic_poses([X.copy()])
+    assert rc.occlusion(pts, up).tolist() == [False, True]
+    assert rc.dynamic_rebuilds == n
+    X3 = X.copy()
+    X3[1, 3] = 0.0
+    rc.set_dynamic_poses([X3])
+    assert rc.occlusion(pts, up).tolist() == [True, False]
+    assert rc.dynamic_rebuilds == n + 1
 
 
 def test_rover_shadow_soft_with_sun_overhead():

@@ -304,11 +304,14 @@ def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: floa
     K = np.array([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy]])
     shift = 4  # fixed-point bits for fillPoly
     polys = []
+    tris = []
     for m, X_WG in zip(meshes, poses, strict=True):
         Xg = np.asarray(X_WG, np.float64)
-        v_W = m.vertices @ Xg[:3, :3].T + Xg[:3, 3]
-        v_C = (v_W - p_WC) @ R_CW.T
-        tri = v_C[m.faces]  # (F, 3, 3)
+        R_CG = R_CW @ Xg[:3, :3]
+        v_C = m.vertices @ R_CG.T + R_CW @ (Xg[:3, 3] - p_WC)
+        tris.append(v_C[m.faces])  # (F, 3, 3)
+    if tris:
+        tri = np.concatenate(tris)
         tri = tri[_in_frustum(tri, camera, near_m)]
         front = tri[:, :, 2] >= near_m
         nfront = front.sum(axis=1)

@@ -375,6 +375,7 @@ class TerrainRaycaster:
         self._dyn_sphere: tuple[np.ndarray, float] | None = None
         self._attr_tables = None
         self.static_rebuilds = 0
+        self.dynamic_rebuilds = 0
 
     # -- static geometry ----------------------------------------------------------------
     def set_terrain(self, lod) -> bool:
@@ -471,14 +472,18 @@ class TerrainRaycaster:
             self.set_dynamic_poses(poses)
 
     def set_dynamic_poses(self, poses: Sequence) -> None:
-        """New poses ``X_WG`` (one per dynamic mesh); the dynamic scene is rebuilt lazily."""
+        """New poses ``X_WG`` (one per dynamic mesh); the dynamic scene is rebuilt lazily,
+        and only if a pose changed (a rover standing still while it images keeps its
+        BVH; ``dynamic_rebuilds`` counts the builds)."""
         if len(poses) != len(self._dyn_meshes):
             raise ConfigError(
                 f"got {len(poses)} poses for {len(self._dyn_meshes)} dynamic meshes; "
                 "one pose per mesh is required"
             )
-        self._dyn_poses = [as_pose_matrix(X) for X in poses]
-        self._dyn_dirty = True
+        new = [as_pose_matrix(X) for X in poses]
+        if not all(np.array_equal(a, b) for a, b in zip(new, self._dyn_poses, strict=True)):
+            self._dyn_dirty = True
+        self._dyn_poses = new
 
     @property
     def dynamic_meshes(self) -> tuple[DynamicMesh, ...]:
@@ -514,6 +519,7 @@ class TerrainRaycaster:
                 [m.albedo for m in self._dyn_meshes] or [0.0], dtype=np.float32
             )
             self._dyn_dirty = False
+            self.dynamic_rebuilds += 1
         return self._dyn_scene
 
     def dynamic_bounding_sphere(self) -> tuple[np.ndarray, float] | None:
