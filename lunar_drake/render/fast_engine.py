@@ -106,7 +106,7 @@ def _tex(a, p, x, y):
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _tex3(a, p, x, y):
-    """Bilinear sample of the first three channels of an (h, w, 4) float32 texture (as
+    """Bilinear sample of the three channels of an (h, w, 3) float32 texture (as
     :func:`_tex`, edge clamped; cell position in float64, weights and sum in float32)."""
     h = a.shape[0]
     w = a.shape[1]
@@ -620,7 +620,7 @@ class FastTerrainEngine:
         is resampled bilinearly when its grid differs) -- once per site/params."""
         nxs, nys = normals
         h, w = nxs.values.shape
-        surf = np.zeros((h, w, 4), np.float32)
+        surf = np.zeros((h, w, 3), np.float32)
         surf[..., 0] = nxs.values
         surf[..., 1] = nys.values
         if albedo is None:

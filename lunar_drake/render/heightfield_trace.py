@@ -255,25 +255,31 @@ def _heights(packed, level, x, y, out):
 @numba.njit(cache=True)
 def _distance_steps(d_max, base_step, res0, pix, nlev):
     """Horizontal sample distances and the mip level read at each (numba)."""
-    n = 0
-    d = base_step
     cap = 1 << 22
-    ds = np.empty(cap, np.float64)
-    lv = np.empty(cap, np.int8)
-    while d < d_max and n < cap:
-        foot = d * pix
-        lev = 0
-        c = res0
-        while lev + 1 < nlev and 2.0 * c <= foot:
-            c *= 2.0
-            lev += 1
-        ds[n] = d
-        lv[n] = lev
-        n += 1
-        d += max(base_step, base_step / res0 * c, foot * 0.5)
-    ds[n] = d
-    lv[n] = lv[n - 1] if n > 0 else 0
-    return ds[: n + 1].copy(), lv[: n + 1].copy()
+    ds = np.empty(0, np.float64)
+    lv = np.empty(0, np.int8)
+    for store in range(2):  # count, then fill arrays of the exact size
+        n = 0
+        d = base_step
+        while d < d_max and n < cap:
+            foot = d * pix
+            lev = 0
+            c = res0
+            while lev + 1 < nlev and 2.0 * c <= foot:
+                c *= 2.0
+                lev += 1
+            if store:
+                ds[n] = d
+                lv[n] = lev
+            n += 1
+            d += max(base_step, base_step / res0 * c, foot * 0.5)
+        if store:
+            ds[n] = d
+            lv[n] = lv[n - 1] if n > 0 else 0
+        else:
+            ds = np.empty(n + 1, np.float64)
+            lv = np.empty(n + 1, np.int8)
+    return ds, lv
 
 
 _GROUP = 16  # profile bins marched side by side
