@@ -307,8 +307,52 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
             ux[j] = math.cos(th)
             uy[j] = math.sin(th)
             kend[b0 + j] = K
+        # steps that every bin of the group takes well inside the DEM (camera inside):
+        # no bounds or state tests there, and results go to row buffers first (stores
+        # to AZ, which the compiler cannot prove apart from the DEM, kept the loop
+        # scalar); this loop compiles to vector code (gathers), 13 -> 7 ms measured
+        k0 = 0
+        A0 = np.empty(G, np.float32)
+        A1 = np.empty(G, np.float32)
+        if bx0 < px < bx1 and by0 < py < by1:
+            dexit = np.inf
+            for j in range(nbg):
+                if ux[j] > 0.0:
+                    dexit = min(dexit, (bx1 - px) / ux[j])
+                elif ux[j] < 0.0:
+                    dexit = min(dexit, (bx0 - px) / ux[j])
+                if uy[j] > 0.0:
+                    dexit = min(dexit, (by1 - py) / uy[j])
+                elif uy[j] < 0.0:
+                    dexit = min(dexit, (by0 - py) / uy[j])
+            dsafe = 0.999 * dexit - 1e-6 * (abs(px) + abs(py) + 1.0)
+            while k0 < K and ds[k0] < dsafe:
+                k0 += 1
+            for k in range(k0):
+                d = ds[k]
+                lev = lv[k]
+                off = offs[lev]
+                h = hs[lev]
+                w = ws[lev]
+                icx = cxs[lev]
+                icy = cys[lev]
+                for j in range(nbg):
+                    x = px + d * ux[j]
+                    y = py + d * uy[j]
+                    z = _bilinear(data, off, h, w, icx, icy, left, top, x, y)
+                    a = (z - pz) / d
+                    am = max(amax[j], a)
+                    amax[j] = am
+                    A0[j] = am
+                    A1[j] = z
+                for j in range(nbg):
+                    AZ[k, b0 + j, 0] = A0[j]
+                    AZ[k, b0 + j, 1] = A1[j]
+            if k0 > 0:
+                for j in range(nbg):
+                    state[j] = 1
         live = nbg
-        for k in range(K):
+        for k in range(k0, K):
             if live == 0:
                 break
             d = ds[k]
