@@ -19,8 +19,8 @@ albedo map x baked lightmap (baked once beforehand, not timed; its bake time is
 reported) x soft rover shadow, indirect fill, Earthshine; then the sensor (``expose``:
 exposure, noise, 12-bit codes). ``hapke_fps = 1 / median(shade + expose)`` over
 ``--frames`` frames after one start-up frame (which builds the LOD and BVH, or the DEM
-pyramid and the reflectance table) and ``--warmup`` (3) untimed frames; VTK gets the
-same. A second pass renders the same frames with the
+pyramid and the reflectance table) and ``--warmup`` (5) untimed frames right before
+the timed ones; VTK gets the same. A second pass renders the same frames with the
 engine's visibility and shading calls wrapped in timers (the rest is "other"); its
 images are checked bit-identical to the first pass. With ``--reference-frames N`` (3) the
 raycast reference engine renders the first N frames too (``reference_engine`` in the
@@ -303,8 +303,8 @@ def main(argv=None) -> int:
     p.add_argument(
         "--warmup",
         type=int,
-        default=3,
-        help="untimed frames per renderer before the timed ones (default 3)",
+        default=5,
+        help="untimed frames per renderer right before its timed ones (default 5)",
     )
     p.add_argument(
         "--block",
@@ -479,21 +479,19 @@ def main(argv=None) -> int:
             vtk_error = f"{type(exc).__name__}: {exc}"
             traceback.print_exc()
 
-    # --- warm-up: the first frames after start-up run slower (the heap grows, glibc's
-    # mmap threshold adapts): --warmup untimed frames per renderer, poses 1, 2, ...
-    for i in range(1, min(args.warmup, args.frames) + 1):
-        hapke_frame(i)
-    if vtk_bench is not None:
-        for i in range(1, min(args.warmup, args.frames) + 1):
-            vtk_bench.frame(i, record=False)
-
     # --- timed frames: blocks of --block Hapke frames and --block VTK frames in turn, so
     # both see the same machine load (the first frame of a block finds caches cold)
     shade_s, expose_s, total_s, radiance_hashes = [], [], [], []
     sh = raw = None
     block = args.frames if args.block <= 0 else min(args.block, args.frames)
+    # each renderer's first block follows --warmup untimed frames of its own (poses 1,
+    # 2, ...): the first frames after start-up, or after the other renderer's frames,
+    # run slower (caches, heap growth)
+    warm = range(1, min(args.warmup, args.frames) + 1)
     for start in range(1, args.frames + 1, block):
         frames = range(start, min(start + block, args.frames + 1))
+        for i in warm if start == 1 else ():
+            hapke_frame(i)
         for i in frames:
             sh, raw, a, b = hapke_frame(i)
             shade_s.append(a)
@@ -501,6 +499,8 @@ def main(argv=None) -> int:
             total_s.append(a + b)
             radiance_hashes.append(_hash(sh.radiance))
         if vtk_bench is not None:
+            for i in warm if start == 1 else ():
+                vtk_bench.frame(i, record=False)
             for i in frames:
                 vtk_bench.frame(i)
     if vtk_bench is not None:
@@ -529,6 +529,8 @@ def main(argv=None) -> int:
 
     # Second pass: the same frames with the camera module's trace() and shade() wrapped
     # in timers (whatever else TerrainCameraRenderer.shade does is "other").
+    for i in warm:  # after the VTK frames: warm up again
+        hapke_frame(i)
     split = split_frames(renderer, poses, illum, dyn, lmap, args.frames, args.engine)
     trace_s, split_shade_s, other_s = split["trace"], split["shade"], split["other"]
     split_same = split["hashes"] == radiance_hashes if split["hashes"] else None
