@@ -117,6 +117,33 @@ def test_trace_agrees_with_embree_on_bumpy_terrain_and_sees_the_hill():
     assert 6.0 < tr.t[mid] < 12.0
 
 
+@pytest.mark.parametrize(
+    ("p", "yaw"),
+    [
+        ([-16.0, 0.3, 3.0], 0.0),  # outside the DEM, looking in: the general march
+        ([10.0, -6.0, 1.5], 60.0),  # near the east edge, rays leave it ahead and right
+        ([-8.0, -7.0, 1.5], 225.0),  # facing a corner of the DEM
+    ],
+)
+def test_trace_agrees_with_embree_from_outside_and_near_the_edges(p, yaw):
+    # profile steps well inside the DEM take a branch-free path, the rest the general
+    # one (entering, leaving): both must agree with Embree
+    hf = _bumpy()
+    pyr = DemPyramid.from_heightfield(hf)
+    cam = _cam()
+    X = _pose(p, yaw_deg=yaw, tilt_deg=12.0)
+    tr = _trace(pyr, cam, X)
+    rc = TerrainRaycaster()
+    rc.set_terrain(TerrainLOD.build(hf, center_xy=(0.0, 0.0), tile_px=64, near_radius_m=40.0))
+    rays, _ = cam.world_rays(X)
+    te = rc.cast_rays(rays, common_origin=True).t_hit
+    assert np.isfinite(te).mean() > 0.2
+    assert (np.isfinite(te) == np.isfinite(tr.t)).mean() > 0.99
+    both = np.isfinite(te) & np.isfinite(tr.t)
+    rel = np.abs(tr.t[both] - te[both]) / te[both]
+    assert np.median(rel) < 2e-3 and np.quantile(rel, 0.95) < 0.03
+
+
 def test_camera_below_the_surface_and_bad_options_raise():
     hf = _bumpy(64)
     pyr = DemPyramid.from_heightfield(hf)
