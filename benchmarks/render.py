@@ -8,8 +8,10 @@ its spawn pose, a camera at the rover's left mast camera position (about 1.5 m a
 the terrain) looking east (grid +x), tilted ``--tilt`` (14) deg down -- the mission
 gimbal's aim at the ground 6 m ahead -- with 1280 x 960 px and a 45 deg vertical field
 of view; the Sun and Earth from the ephemeris at the scenario epoch (sim time 0).
-Frame ``i`` moves the camera ``i * --step`` (0.1 m) east, following the ground, so
-nothing is cached between frames; the LOD centre stays put (< lod_recenter_m of motion).
+Frame ``i`` moves the camera ``i * --step`` (0.1 m) east, following the ground, so no
+image is cached between frames; the LOD centre stays put (< lod_recenter_m of motion).
+The rover stands still, so its Embree BVH is built once (it is rebuilt when a pose
+changes), as VTK keeps its meshes.
 
 Hapke (:class:`lunar_drake.render.camera.TerrainCameraRenderer`, full shading, engine
 ``--engine``, default ``heightfield``): one ray per pixel (the heightfield engine marches
@@ -40,10 +42,10 @@ steady state; ``ratio = hapke_fps / vtk_fps``. ``--block N`` interleaves blocks 
 Hapke and N VTK frames instead, so that slow drifts of the load from other tenants of a
 shared machine fall on both alike; measured here, a Hapke frame that follows VTK
 frames runs slower (its data has left the caches), so interleaving lowers the ratio.
-With the size check
-(default) a 640 x 480 VTK camera is timed too, so the full-size time is seen to scale
-with the pixel count (it really renders), and an Eval without a pose change shows the
-cache hit.
+
+With the size check (default) a 640 x 480 VTK camera is timed too, so the full-size time
+is seen to scale with the pixel count (it really renders), and an Eval without a pose
+change shows the cache hit.
 
 Prints a table; writes JSON with --out. Goals: hapke_fps >= 10, ratio >= 2.
 """
