@@ -285,6 +285,12 @@ def _distance_steps(d_max, base_step, res0, pix, nlev):
 _GROUP = 16  # profile bins marched side by side
 
 
+@numba.njit(cache=True, inline="always")
+def _level(offs, hs, ws, cxs, cys, lev):
+    """(offset, rows, cols, 1/cell x, 1/cell y) of mip level ``lev`` in the packed data."""
+    return offs[lev], hs[lev], ws[lev], cxs[lev], cys[lev]
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend):
     """AZ[k, b] = (running max of the elevation slope, terrain height) along bin b.
@@ -330,12 +336,7 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
                 k0 += 1
             for k in range(k0):
                 d = ds[k]
-                lev = lv[k]
-                off = offs[lev]
-                h = hs[lev]
-                w = ws[lev]
-                icx = cxs[lev]
-                icy = cys[lev]
+                off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
                 for j in range(nbg):
                     x = px + d * ux[j]
                     y = py + d * uy[j]
@@ -356,12 +357,7 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
             if live == 0:
                 break
             d = ds[k]
-            lev = lv[k]
-            off = offs[lev]
-            h = hs[lev]
-            w = ws[lev]
-            icx = cxs[lev]
-            icy = cys[lev]
+            off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
             for j in range(nbg):
                 st = state[j]
                 if st == 2:
