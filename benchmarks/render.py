@@ -328,6 +328,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.frames < 5:
         p.error(f"--frames = {args.frames}; at least 5")
+    if args.warmup < 0 or args.block < 0:
+        p.error(f"--warmup = {args.warmup}, --block = {args.block}; both must be >= 0")
     if args.images:
         os.makedirs(args.images, exist_ok=True)
     t_start = time.perf_counter()
