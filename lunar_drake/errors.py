@@ -45,6 +45,10 @@ class SimulationError(LunarDrakeError, RuntimeError):
     """A simulation could not be built or ran into an unrecoverable state."""
 
 
+class OutputError(LunarDrakeError, OSError):
+    """An output file or directory cannot be written (the message names the path)."""
+
+
 def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit="") -> None:
     """Raises OutOfRangeError naming ``name`` and ``value`` unless lo <= value <= hi
     (strict at an ``_open`` end); NaN is always out of range."""
