@@ -27,6 +27,8 @@ import platform
 import sys
 import time
 
+from lunar_drake.files import atomic_write_text, check_output_file
+
 
 def make_dem(size: int, res: float, seed: int, factor: int = 128):
     import numpy as np
@@ -72,6 +74,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--out", default=None, help="write results JSON here")
     args = p.parse_args(argv)
+    if args.out:
+        check_output_file(args.out, what="results JSON")
 
     import numpy as np
 
@@ -174,8 +178,7 @@ def main(argv=None) -> int:
         f"(penumbra cells {c['partial_fraction_bruteforce']:.1%})"
     )
     if args.out:
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=2)
+        atomic_write_text(args.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 
 

@@ -28,7 +28,7 @@ images are checked bit-identical to the first pass. With ``--reference-frames N`
 raycast reference engine renders the first N frames too (``reference_engine`` in the
 JSON: its frame rate and its agreement with the timed engine on frame 1).
 
-VTK (:class:`lunar_drake.render.vtk_reference.VtkReferenceCamera`): the same LOD mesh
+VTK (:class:`benchmarks.vtk_reference.VtkReferenceCamera`): the same LOD mesh
 (``TerrainLOD.merged()``, skirts included -- the very triangles the ray caster sees)
 written to an OBJ with the albedo draped as a texture, welded to the world of a
 MultibodyPlant/SceneGraph that also holds the rover (its SDF visuals; the camera head
@@ -67,7 +67,18 @@ import traceback
 
 import numpy as np
 
+from lunar_drake.files import atomic_write_text, check_output_file
+
 GOALS = {"hapke_fps": 10.0, "ratio": 2.0}
+
+
+def _vtk():
+    """The VTK reference camera module (beside this script)."""
+    try:
+        from benchmarks import vtk_reference
+    except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+        import vtk_reference
+    return vtk_reference
 
 
 def _median(xs):
@@ -105,17 +116,18 @@ def _rover_plant(scenario, hf):
 def add_spawned_rover(plant, scenario, hf):
     """Adds the scenario's rover to an unfinalized plant and sets its default pose to the
     spawn pose (floating base)."""
-    from lunar_drake.diagrams.rover import add_rover_model, check_soil_name, spawn_pose
+    from lunar_drake.models.rover_sdf import add_rover
+    from lunar_drake.models.spawn import spawn_pose
 
     rc = scenario.rover
-    rover = add_rover_model(plant, description=rc.description)
+    rover = add_rover(plant, description=rc.description)
     X = spawn_pose(
         heightfield=hf,
         rover=rover,
         x_m=rc.spawn_x_m,
         y_m=rc.spawn_y_m,
         yaw_rad=math.radians(rc.spawn_yaw_deg),
-        soil=check_soil_name(rc.soil),
+        soil=scenario.soil,
     )
     plant.SetDefaultFloatingBaseBodyPose(rover.chassis, X)
     return rover
@@ -195,7 +207,7 @@ class VtkBench:
     """RenderEngineVtk timing: :meth:`frame` per pose, :meth:`finish` for the rest."""
 
     def __init__(self, args, *, obj, sun_W, poses, scenario, hf, rover_bodies_hidden):
-        from lunar_drake.render.vtk_reference import VtkReferenceCamera
+        VtkReferenceCamera = _vtk().VtkReferenceCamera
 
         self.args, self.obj, self.sun_W, self.poses = args, obj, sun_W, poses
         self.out = {}
@@ -256,7 +268,7 @@ class VtkBench:
         out["mean_rgb"] = float(last[..., :3].mean()) if last is not None else None
         out["gl_libraries"] = _gl_libraries()
         if not args.no_size_check:
-            from lunar_drake.render.vtk_reference import VtkReferenceCamera
+            VtkReferenceCamera = _vtk().VtkReferenceCamera
 
             w, h = args.width // 2, args.height // 2
             small = VtkReferenceCamera(
@@ -326,6 +338,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--out", default=None, help="write results JSON here")
     args = p.parse_args(argv)
+    if args.out:
+        check_output_file(args.out, what="results JSON")
     if args.frames < 5:
         p.error(f"--frames = {args.frames}; at least 5")
     if args.warmup < 0 or args.block < 0:
@@ -341,22 +355,22 @@ def main(argv=None) -> int:
 
     from lunar_drake import rng
     from lunar_drake.ephemeris.sun_earth import SiteLocation
-    from lunar_drake.mission import load_site_layers
     from lunar_drake.render import shading
-    from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+    from lunar_drake.render.camera import CameraConfig, TerrainCameraRenderer
     from lunar_drake.render.lightmap import lightmap
     from lunar_drake.render.terrain_lod import TerrainLOD
-    from lunar_drake.render.vtk_reference import write_terrain_obj
-    from lunar_drake.scenario import load_scenario
-    from lunar_drake.site import ensure_site
+    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.site import load_site
     from lunar_drake.systems.ephemeris_source import EphemerisSource
     from lunar_drake.systems.hapke_camera import rover_meshes
     from lunar_drake.systems.lightmap_source import sun_grid_az_el
 
     # --- scene ------------------------------------------------------------------------
     t0 = time.perf_counter()
+    write_terrain_obj = _vtk().write_terrain_obj
     s = load_scenario(scenario_name=args.scenario)
-    hf, albedo = load_site_layers(ensure_site(s, progress=False))
+    site_data = load_site(s, progress=False)
+    hf, albedo = site_data.heightfield, site_data.albedo
     site_s = time.perf_counter() - t0
     site = SiteLocation(s.site.latitude_deg, s.site.longitude_deg)
     az, el = (
@@ -370,11 +384,11 @@ def main(argv=None) -> int:
     earth_km = float(eph.earth_distance_output.Eval(ec)[0])
     earth_phase = float(eph.earth_phase_output.Eval(ec)[0])
 
-    model = CameraModel(
+    model = CameraConfig(
         width=args.width,
         height=args.height,
         fov_y_deg=args.fov,
-        shadow_samples=s.camera.shadow_samples,
+        shadow_samples=s.sensors.camera.shadow_samples,
         engine=args.engine,
     )
     plant, sg, rover, _diagram, dctx = _rover_plant(s, hf)  # keep the diagram alive
@@ -717,10 +731,7 @@ def main(argv=None) -> int:
     if vtk_error:
         print(f"VTK failed: {vtk_error}")
     if args.out:
-        tmp = f"{args.out}.tmp{os.getpid()}"
-        with open(tmp, "w") as f:
-            json.dump(result, f, indent=2)
-        os.replace(tmp, args.out)
+        atomic_write_text(args.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 
 

@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from lunar_drake import rng
+from lunar_drake.files import atomic_write_text, check_output_file
 from lunar_drake.render import hapke as hk
 from lunar_drake.render import sensor as sn
 
@@ -84,6 +85,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeat", type=int, default=5)
     p.add_argument("--out", type=str, default="")
     a = p.parse_args(argv)
+    if a.out:
+        check_output_file(a.out, what="results JSON")
     rows = []
     rnd = _random_geometry()
     scene = _scene_geometry()
@@ -118,8 +121,8 @@ def main(argv=None) -> int:
     for r in rows:
         print(f"{r['case']:<16} {r['dtype']:<8} {r['workers']:>7} {r['ms']:>8.1f}")
     if a.out:
-        with open(a.out, "w") as fh:
-            json.dump({"width": W, "height": H, "repeat": a.repeat, "rows": rows}, fh, indent=2)
+        result = {"width": W, "height": H, "repeat": a.repeat, "rows": rows}
+        atomic_write_text(a.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 
 

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import psutil
 
+from lunar_drake.files import atomic_write_text, check_output_file
+
 
 class PeakRSS:
     """Samples this process's resident set size in a thread; ``peak`` in bytes."""
@@ -66,6 +68,8 @@ def main(argv=None) -> int:
     p.add_argument("--keep", default=None, help="keep the site in this directory")
     p.add_argument("--out", default=None, help="write results JSON here")
     args = p.parse_args(argv)
+    if args.out:
+        check_output_file(args.out, what="results JSON")
 
     import numpy as np
     from pydrake.systems.analysis import Simulator
@@ -153,7 +157,7 @@ def main(argv=None) -> int:
     st = runs[-1]["stage_s"]
     print("stages (s): " + ", ".join(f"{k} {v:.1f}" for k, v in st.items()))
     if args.out:
-        Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+        atomic_write_text(args.out, json.dumps(result, indent=2) + "\n", what="results JSON")
     return 0
 
 

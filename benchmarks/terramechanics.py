@@ -20,7 +20,6 @@ import time
 import numpy as np
 
 from lunar_drake.dynamics.terramechanics import (
-    LUNAR_GRAVITY_MPS2,
     LUNAR_REGOLITH,
     WheelParams,
     normal_force,
@@ -28,6 +27,8 @@ from lunar_drake.dynamics.terramechanics import (
     static_sinkage,
     wheel_forces,
 )
+from lunar_drake.files import atomic_write_text, check_output_file
+from lunar_drake.moon import GRAVITY_MPS2
 
 
 def _time(fn, calls: int) -> dict:
@@ -51,12 +52,14 @@ def main(argv=None) -> int:
     p.add_argument("--calls", type=int, default=1000)
     p.add_argument("--out", default=None, help="write results as JSON here")
     a = p.parse_args(argv)
+    if a.out:
+        check_output_file(a.out, what="results JSON")
 
     wheel = WheelParams(radius_m=0.25, width_m=0.2)
     soil = LUNAR_REGOLITH
     n = a.wheels
     rng = np.random.default_rng(0)
-    W = np.full(n, 50.0 * LUNAR_GRAVITY_MPS2)
+    W = np.full(n, 50.0 * GRAVITY_MPS2)
     z = static_sinkage(W, wheel=wheel, soil=soil) * rng.uniform(0.8, 1.2, n)
     z_dot = rng.normal(0.0, 0.01, n)
     slip = rng.uniform(0.0, 0.4, n)
@@ -94,8 +97,7 @@ def main(argv=None) -> int:
             "processor": platform.processor(),
             "results": rows,
         }
-        with open(a.out, "w") as fh:
-            json.dump(result, fh, indent=2)
+        atomic_write_text(a.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 
 

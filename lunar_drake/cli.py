@@ -1,7 +1,8 @@
 """The ``lunar-drake`` command.
 
-lunar-drake run [--scenario NAME|FILE[:NAME]] [--scenario-text YAML] [--duration S]
-                [--out DIR] [--no-meshcat] [--wait]
+lunar-drake run [--scenario NAME|FILE[:NAME]|RUN/scenario.yaml] [--scenario-text YAML]
+                [--duration S] [--no-cameras] [--soil NAME|FILE] [--out DIR]
+                [--no-meshcat] [--meshcat-host HOST] [--wait] [--no-progress]
 lunar-drake terrain synth --size N --resolution M --seed S --out DIR [...]
 lunar-drake scenarios [FILE]
 """
@@ -26,60 +27,142 @@ def _split_scenario(arg: str):
     return None, arg
 
 
-def _cmd_run(args) -> int:
-    from lunar_drake.mission import run_mission
-    from lunar_drake.scenario import load_scenario
+def _soil_override(arg: str) -> dict:
+    """``--soil NAME`` (a preset) or ``--soil FILE.yaml`` (a soil section) as overrides."""
+    import dataclasses as dc
+
+    import yaml
+
+    from lunar_drake.dynamics import terramechanics as tm
+
+    if arg.endswith((".yaml", ".yml")):
+        path = Path(arg)
+        if not path.is_file():
+            raise ConfigError(f"--soil {arg!r} does not exist")
+        try:
+            data = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--soil {arg!r} is not valid YAML: {exc}") from None
+        if isinstance(data, dict) and set(data) == {"soil"}:
+            data = data["soil"]
+        if not isinstance(data, dict):
+            raise ConfigError(f"--soil {arg!r} must hold a mapping of soil parameters")
+        return {"soil": data}
+    try:
+        return {"soil": dc.asdict(tm.soil_preset(arg))}
+    except ConfigError as exc:
+        raise ConfigError(f"--soil: {exc}") from None
+
+
+def resolve_run_scenario(args):
+    """The scenario of ``lunar-drake run``: the named or given scenario, then
+    ``--scenario-text``, then the flags as overrides of scenario fields (so the run's
+    ``scenario.yaml`` says everything)."""
+    import yaml
+
+    from lunar_drake.scenario_files import apply_overrides, load_scenario
 
     filename, name = _split_scenario(args.scenario)
     scenario = load_scenario(
         filename=filename, scenario_name=name, scenario_text=args.scenario_text
     )
-    out = Path(args.out) if args.out else Path("runs") / name
+    flags: dict = {}
+    if args.duration is not None:
+        flags["simulation_duration"] = float(args.duration)
+    if args.no_cameras:
+        flags["sensors"] = {"camera": {"enabled": False}}
+    if args.soil is not None:
+        flags.update(_soil_override(args.soil))
+    if flags:
+        scenario = apply_overrides(
+            scenario, yaml.safe_dump(flags, default_flow_style=True), source="command-line flags"
+        )
+    return scenario, name
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def _cmd_run(args) -> int:
+    from lunar_drake import metrics, outputs
+    from lunar_drake.files import check_replaceable, staged_directory
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
+    scenario, name = resolve_run_scenario(args)
+    out = Path(args.out) if args.out else Path("runs") / (scenario.name or name)
+    check_replaceable(out, allowed=outputs.RUN_DIR_NAMES, what="run directory")
     meshcat = None
     if not args.no_meshcat:
-        from pydrake.geometry import Meshcat
+        from pydrake.geometry import Meshcat, MeshcatParams
 
-        meshcat = Meshcat()
+        meshcat = Meshcat(MeshcatParams(host=args.meshcat_host))
         print(f"Meshcat: {meshcat.web_url()}", flush=True)
-    print(f"Scenario {name!r} (seed {scenario.random_seed}); building the site...", flush=True)
-    result = run_mission(
-        scenario=scenario,
-        scenario_name=name,
-        out_dir=out,
-        meshcat=meshcat,
-        duration=args.duration,
-        progress=not args.no_progress,
-        cameras=not args.no_cameras,
+    print(
+        f"Scenario {scenario.name or name!r} (seed {scenario.random_seed}); building the site...",
+        flush=True,
     )
-    t = result.timing
-    s = result.summary["site"]
+    with staged_directory(out, what="run directory") as tmp:
+        t0 = time.perf_counter()
+        site = load_site(scenario, progress=not args.no_progress)
+        t_site = time.perf_counter() - t0
+        logs = simulate(
+            scenario=scenario,
+            site=site,
+            meshcat=meshcat,
+            progress=not args.no_progress,
+            frames_dir=tmp / "frames" if scenario.logging.save_frames else None,
+        )
+        summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
+        timing = {
+            "site_s": t_site,
+            "site_cached": bool(site.site.cached) if site.site else False,
+            "site_dir": str(site.site.directory or site.site.dem) if site.site else "",
+            **logs.wall,
+        }
+        outputs.write_run(
+            tmp,
+            scenario=scenario,
+            logs=logs,
+            summary=summary,
+            timing=timing,
+            meshcat_html=meshcat.StaticHtml() if meshcat is not None else None,
+        )
+    s = summary["site"]
     print(
         f"Site: {s['shape_px'][0]}x{s['shape_px'][1]} px at {s['resolution_m']:g} m"
-        + (f", {s.get('craters')} craters, {s.get('rocks')} rocks" if "craters" in s else "")
-        + f" ({'cached' if t['site_cached'] else 'built'} in {t['site_s']:.1f} s; "
-        f"{t['site_dir']})"
+        + (f", {s['craters']} craters, {s['rocks']} rocks" if "craters" in s else "")
+        + f" ({'cached' if timing['site_cached'] else 'built'} in {t_site:.1f} s; "
+        f"{timing['site_dir']})"
     )
+    rtf = timing["realtime_factor"]
     print(
-        f"Simulated {result.summary['simulated_s']:.2f} s in {t['simulate_s']:.2f} s "
-        f"({t['realtime_factor']:.1f}x real time; diagram built in {t['build_s']:.2f} s); "
-        f"stop: {result.summary['stop_reason']}"
+        f"Simulated {summary['simulated_s']:.2f} s in {timing['simulate_s']:.2f} s "
+        + (f"({rtf:.1f}x real time; " if rtf else "(")
+        + f"diagram built in {timing['build_s']:.2f} s); stop: {summary['stop_reason']}"
     )
-    if "rover" in result.summary:
-        rv = result.summary["rover"]
+    rv = summary["rover"]
+    print(
+        f"Rover: drove {rv['distance_m']:.1f} m, mean slip {100 * rv['mean_slip_moving']:.1f}%, "
+        f"max sinkage {100 * rv['max_sinkage_m']:.1f} cm, max tilt {rv['max_tilt_deg']:.1f} deg, "
+        f"drive energy {rv['energy_J']:.0f} J"
+    )
+    loc = summary["localization"]
+    if loc:
         print(
-            f"Rover: drove {rv['distance_m']:.1f} m, "
-            f"mean slip {100 * rv['mean_slip_moving']:.1f}%, "
-            f"max sinkage {100 * rv['max_sinkage_m']:.1f} cm, "
-            f"max tilt {rv['max_tilt_deg']:.1f} deg, drive energy {rv['energy_J']:.0f} J"
+            f"On-board estimate at the end: {loc['final_position_error_m']:.2f} m off, "
+            f"heading {loc['final_heading_error_deg']:.2f} deg off; ground received "
+            f"{_plural(summary['telemetry_received'], 'telemetry packet')}"
         )
-    files = ["scenario.yaml", "summary.json", "timing.json"]
-    files += result.summary.get("rover", {}).get("logs", [])
-    if result.summary.get("camera_frames"):
-        files.append(f"frames/ ({result.summary['camera_frames']} stereo frames)")
-    files += ["meshcat.html"] if meshcat is not None else []
-    print(f"Outputs: {result.out_dir.resolve()} ({', '.join(files)})")
+    files = outputs.run_files()
+    if summary["camera_frames"]:
+        files.append(f"frames/ ({_plural(summary['camera_frames'], 'stereo frame')})")
     if meshcat is not None:
-        print(f"Meshcat: {result.meshcat_url} (static replay: {result.out_dir / 'meshcat.html'})")
+        files.append("meshcat.html")
+    print(f"Outputs: {out.resolve()} ({', '.join(files)})")
+    if meshcat is not None:
+        print(f"Meshcat: {meshcat.web_url()} (static replay: {out / 'meshcat.html'})")
         if args.wait:
             print("Serving Meshcat; press Ctrl-C to stop.", flush=True)
             try:
@@ -91,7 +174,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_scenarios(args) -> int:
-    from lunar_drake.scenario import default_scenario_file, scenario_names
+    from lunar_drake.scenario_files import default_scenario_file, scenario_names
 
     f = args.file or default_scenario_file()
     for n in scenario_names(filename=f):
@@ -146,7 +229,7 @@ def _cmd_synth(args) -> int:
 
 def _cmd_render(args) -> int:
     from lunar_drake.render_cli import render_stereo
-    from lunar_drake.scenario import load_scenario
+    from lunar_drake.scenario_files import load_scenario
 
     filename, name = _split_scenario(args.scenario)
     scenario = load_scenario(
@@ -211,10 +294,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenario name in the packaged file, or FILE.yaml[:NAME]",
     )
     r.add_argument("--scenario-text", default="{}", help="YAML overrides, e.g. '{random_seed: 3}'")
-    r.add_argument("--duration", type=float, default=None, help="simulated seconds (override)")
+    r.add_argument(
+        "--duration", type=float, default=None, help="simulated seconds (sets simulation_duration)"
+    )
     r.add_argument("--out", default=None, help="run directory (default runs/<scenario>)")
     r.add_argument("--no-meshcat", action="store_true", help="headless, no Meshcat server")
-    r.add_argument("--no-cameras", action="store_true", help="skip the Hapke stereo cameras")
+    r.add_argument(
+        "--meshcat-host",
+        default="127.0.0.1",
+        help="interface Meshcat listens on (default 127.0.0.1; '*' opens it to the network)",
+    )
+    r.add_argument(
+        "--no-cameras",
+        action="store_true",
+        help="skip the Hapke stereo cameras (sets sensors.camera.enabled: false)",
+    )
+    r.add_argument(
+        "--soil", default=None, help="soil preset (lunar_regolith, grc1) or a soil YAML file"
+    )
     r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.set_defaults(func=_cmd_run)
@@ -317,6 +414,9 @@ def main(argv: list[str] | None = None) -> int:
     except LunarDrakeError as exc:
         print(f"lunar-drake: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("lunar-drake: interrupted; partial outputs removed", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

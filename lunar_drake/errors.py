@@ -49,6 +49,14 @@ class OutputError(LunarDrakeError, OSError):
     """An output file or directory cannot be written (the message names the path)."""
 
 
+def format_value(value) -> str:
+    """A value for a message: floats to 6 significant digits (13.3, not 13.299999999999999),
+    everything else as ``repr``."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return repr(value)
+
+
 def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit="") -> None:
     """Raises OutOfRangeError naming ``name`` and ``value`` unless lo <= value <= hi
     (strict at an ``_open`` end); NaN is always out of range."""
@@ -61,5 +69,5 @@ def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit=
         lb = "(" if lo_open else "["
         rb = ")" if hi_open else "]"
         raise OutOfRangeError(
-            f"{name} = {value!r} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
+            f"{name} = {format_value(value)} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
         )

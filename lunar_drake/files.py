@@ -25,6 +25,8 @@ __all__ = [
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_output_file",
+    "check_replaceable",
     "ensure_output_dir",
     "staged_directory",
     "temp_sibling",
@@ -56,13 +58,42 @@ def ensure_output_dir(path: str | os.PathLike, *, what: str = "output directory"
     try:
         p.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
-        raise OutputError(f"cannot write {what} {str(p)!r}: it exists and is not a directory")
+        raise OutputError(
+            f"cannot write {what} {str(p)!r}: it exists and is not a directory"
+        ) from None
     except OSError as exc:
         raise OutputError(f"cannot write {what} {str(p)!r}: {_reason(exc)}") from None
     if not p.is_dir():
         raise OutputError(f"cannot write {what} {str(p)!r}: it is not a directory")
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {what} {str(p)!r}: permission denied")
+    return p
+
+
+def check_output_file(path: str | os.PathLike, *, what: str = "file") -> Path:
+    """Checks, before any work, that file ``path`` can be written; returns ``path``.
+
+    Its directory must exist, ``path`` must not be a directory, and a probe file must be
+    creatable (and is removed again) next to it, so the check also holds for root and
+    for special file systems such as ``/proc``. Creates nothing that stays.
+
+    Raises:
+        OutputError: naming ``what``, the path and the reason.
+    """
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    if p.is_dir():
+        raise OutputError(f"cannot write {what} {str(p)!r}: it is a directory")
+    if not parent.is_dir():
+        why = "is not a directory" if parent.exists() else "does not exist"
+        raise OutputError(f"cannot write {what} {str(p)!r}: {str(parent)!r} {why}")
+    probe = temp_sibling(p, tag="probe")
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        raise OutputError(f"cannot write {what} {str(p)!r}: {_reason(exc)}") from None
+    os.close(fd)
+    _unlink_quietly(probe)
     return p
 
 
@@ -115,20 +146,63 @@ def _unlink_quietly(path: Path) -> None:
 
 
 def _created_parents(path: Path) -> list[Path]:
-    """The missing ancestors of ``path`` (outermost first), created here."""
+    """The missing ancestors of ``path`` (outermost first), created here. If one cannot
+    be created, those created before it are removed again and the error is raised."""
     missing = []
     for parent in reversed(path.parents):
         if not parent.exists():
             missing.append(parent)
-    for parent in missing:
-        parent.mkdir()
+    done: list[Path] = []
+    try:
+        for parent in missing:
+            parent.mkdir()
+            done.append(parent)
+    except BaseException:
+        _remove_empty(done)
+        raise
     return missing
 
 
+def _remove_empty(created: list[Path]) -> None:
+    """Removes directories created here (innermost first) if they are still empty."""
+    for parent in reversed(created):
+        with contextlib.suppress(OSError):
+            parent.rmdir()
+
+
+def check_replaceable(path: str | os.PathLike, *, allowed, what: str) -> None:
+    """Refuses, before any work, to replace an existing directory ``path`` that holds
+    anything but ``allowed`` names (a previous output of the same kind) and leftovers of
+    interrupted writes (hidden ``.*.tmp-*`` / ``.*.old-*`` siblings). ``--out .`` or a
+    data folder is never deleted wholesale.
+
+    Raises:
+        OutputError: naming the path and a few of the foreign entries.
+    """
+    p = Path(path)
+    if not p.is_dir():
+        return
+    try:
+        names = os.listdir(p)
+    except OSError as exc:
+        raise OutputError(f"cannot write {what} {str(p)!r}: {_reason(exc)}") from None
+    allowed = set(allowed)
+    foreign = sorted(
+        n
+        for n in names
+        if n not in allowed and not (n.startswith(".") and (".tmp-" in n or ".old-" in n))
+    )
+    if foreign:
+        shown = ", ".join(repr(n) for n in foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+        raise OutputError(
+            f"cannot write {what} {str(p)!r}: it exists and holds {len(foreign)} "
+            f"entries that are not {what} outputs ({shown}); it would be replaced as a "
+            "whole, so give a new or empty directory"
+        )
+
+
 @contextlib.contextmanager
-def staged_directory(
-    path: str | os.PathLike, *, what: str = "output directory"
-) -> Iterator[Path]:
+def staged_directory(path: str | os.PathLike, *, what: str = "output directory") -> Iterator[Path]:
     """Builds a whole directory under a temporary sibling name and swaps it in at the end.
 
     Yields the temporary directory. On success the previous ``path`` (if any) is moved
@@ -140,7 +214,7 @@ def staged_directory(
     Raises:
         OutputError: ``path`` is a file, or its parent cannot be created or written.
     """
-    p = Path(path)
+    p = Path(os.path.abspath(path))  # "--out ." stages beside the real name
     if p.exists() and not p.is_dir():
         raise OutputError(f"cannot write {what} {str(p)!r}: it exists and is not a directory")
     try:
@@ -162,12 +236,19 @@ def staged_directory(
         if p.exists():
             old = temp_sibling(p, tag="old")
             os.rename(p, old)
-        os.rename(tmp, p)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        try:
+            os.rename(tmp, p)
+        except BaseException:
+            if old is not None and not p.exists():
+                with contextlib.suppress(OSError):
+                    os.rename(old, p)  # put the previous directory back
+            raise
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
-        for parent in reversed(created):
-            with contextlib.suppress(OSError):
-                parent.rmdir()  # only if still empty
+        _remove_empty(created)
         raise
+    if old is not None:
+        if old.is_symlink():  # ``path`` was a link: drop the link, not what it points to
+            _unlink_quietly(old)
+        else:
+            shutil.rmtree(old, ignore_errors=True)

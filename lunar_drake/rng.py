@@ -1,10 +1,14 @@
 """Deterministic random streams.
 
-Two kinds, per DESIGN.md decision 6:
+Three kinds, per DESIGN.md decision 6:
 
 * :func:`generator` -- a numpy ``Generator`` seeded from the scenario seed and a
   stream name (stable across Python runs; never Python's salted ``hash``). Use it for
   things sampled once for a whole site (crater and rock catalogs).
+* :func:`sample_generator` -- a numpy ``Generator`` for sample ``k`` of a stream
+  (Philox keyed by the stream key and ``k``). Sensors draw each sample's noise from it,
+  so a measurement depends only on (seed, system name, sample index, truth) and no
+  random state lives outside the Context.
 * :func:`hash_uniform` / :func:`hash_normal` -- counter-based values keyed by
   (seed, stream, i, j): the value for a grid cell depends only on its global integer
   position, never on the tile or worker that computes it. Use these for any per-pixel
@@ -39,6 +43,16 @@ def stream_key(seed: int, name: str) -> int:
 def generator(seed: int, name: str) -> np.random.Generator:
     """A numpy Generator for the named stream under ``seed``."""
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence([stream_key(seed, name)])))
+
+
+def sample_generator(key: int, index: int) -> np.random.Generator:
+    """A numpy Generator for sample ``index`` (>= 0) of the stream ``key``.
+
+    Philox is a keyed pseudo-random function: the 128-bit key (``key``, ``index``) gives
+    an independent stream per sample, so sample k's values never overlap sample k+1's
+    however many values each draws.
+    """
+    return np.random.Generator(np.random.Philox(key=[int(key), int(index)]))
 
 
 def _mix(z: np.ndarray) -> np.ndarray:

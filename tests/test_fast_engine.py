@@ -9,7 +9,7 @@ import pytest
 
 from lunar_drake.errors import OutOfRangeError
 from lunar_drake.render import hapke as hapke_mod
-from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+from lunar_drake.render.camera import CameraConfig, TerrainCameraRenderer
 from lunar_drake.render.fast_engine import rover_pixel_mask
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
@@ -241,7 +241,7 @@ def _renderers(hf, meshes, w=128, h=96):
     albedo = albedo.reshape(hf.shape).astype(np.float32)
     out = {}
     for eng in ("heightfield", "raycast"):
-        model = CameraModel(width=w, height=h, fov_y_deg=50.0, engine=eng, near_radius_m=40.0)
+        model = CameraConfig(width=w, height=h, fov_y_deg=50.0, engine=eng, near_radius_m=40.0)
         out[eng] = TerrainCameraRenderer(
             heightfield=hf, albedo=albedo, model=model, dynamic_meshes=meshes
         )

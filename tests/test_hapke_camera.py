@@ -8,7 +8,7 @@ import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
 from lunar_drake.errors import OutOfRangeError
-from lunar_drake.render.camera import CameraModel, TerrainCameraRenderer
+from lunar_drake.render.camera import CameraConfig, TerrainCameraRenderer
 from lunar_drake.render.hapke import HIGHLANDS_643NM, hapke_reflectance
 from lunar_drake.terrain.heightfield import Heightfield
 
@@ -27,7 +27,7 @@ def _down_camera(height=3.0):
 def test_flat_plane_matches_closed_form_hapke(engine, rtol):
     # the heightfield engine reads a tabulated BRDF (see hapke_lut), hence its tolerance
     r = TerrainCameraRenderer(
-        heightfield=_flat(), model=CameraModel(width=65, height=49, engine=engine)
+        heightfield=_flat(), model=CameraConfig(width=65, height=49, engine=engine)
     )
     el = math.radians(30.0)
     illum, up = r.illumination(sun_dir_W=(math.cos(el), 0.0, math.sin(el)))
@@ -45,7 +45,7 @@ def test_flat_plane_matches_closed_form_hapke(engine, rtol):
 
 
 def test_sensor_frames_are_bit_identical_and_exposure_checked():
-    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraConfig(width=64, height=48))
     illum, _ = r.illumination(sun_dir_W=(0.9, 0.0, 0.43))
     img = r.shade(X_WC=_down_camera(), illumination=illum)
     a = r.expose(img, exposure_s=0.002, gain=1.0, key=7, frame_index=3)
@@ -57,11 +57,11 @@ def test_sensor_frames_are_bit_identical_and_exposure_checked():
     with pytest.raises(OutOfRangeError, match="exposure"):
         r.expose(img, exposure_s=0.0, gain=1.0, key=7, frame_index=3)
     with pytest.raises(OutOfRangeError, match="exposure_s"):
-        CameraModel(exposure_s=-1.0)
+        CameraConfig(exposure_s=-1.0)
 
 
 def test_sun_below_horizon_is_dark_but_not_black():
-    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraConfig(width=64, height=48))
     day, _ = r.illumination(sun_dir_W=(0.9, 0.0, 0.2))
     night, up = r.illumination(
         sun_dir_W=(0.99, 0.0, -0.05),
@@ -83,26 +83,29 @@ def test_sun_below_horizon_is_dark_but_not_black():
     assert only_earth.earth_irradiance > 0
 
 
-def test_mission_stereo_pair_renders_terrain_and_is_deterministic(tmp_path, monkeypatch):
+def _camera_after(scenario, site, t):
+    """(mission diagram, simulator, camera system, its context) after ``t`` seconds."""
     from pydrake.systems.analysis import Simulator
 
     from lunar_drake.diagrams.mission import MakeMissionDiagram
-    from lunar_drake.mission import load_site_layers
-    from lunar_drake.scenario import load_scenario
-    from lunar_drake.site import ensure_site
+    from lunar_drake.scenario_files import apply_overrides
 
-    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
-    s = load_scenario(
-        scenario_name="small", scenario_text="{camera: {width: 96, height: 72, rate_hz: 1.0}}"
-    )
-    hf, alb = load_site_layers(ensure_site(s, progress=False))
+    scenario = apply_overrides(scenario, f"{{simulation_duration: {t + 1.0}}}")
+    d = MakeMissionDiagram(scenario=scenario, site=site)
+    sim = Simulator(d)
+    sim.AdvanceTo(t)
+    cam = d.GetSubsystemByName("plant").GetSubsystemByName("camera")
+    return d, sim, cam, cam.GetMyContextFromRoot(sim.get_context())
+
+
+def test_mission_stereo_pair_renders_terrain_and_is_deterministic(small_site):
+    from lunar_drake.scenario_files import apply_overrides
+
+    scenario, site = small_site
+    s = apply_overrides(scenario, "{sensors: {camera: {width: 96, height: 72, rate_hz: 1.0}}}")
     frames = []
     for _ in range(2):
-        d = MakeMissionDiagram(scenario=s, heightfield=hf, albedo=alb, duration_s=2.0)
-        sim = Simulator(d)
-        sim.AdvanceTo(1.5)
-        cam = d.GetSubsystemByName("camera")
-        ctx = cam.GetMyContextFromRoot(sim.get_context())
+        d, sim, cam, ctx = _camera_after(s, site, 1.5)
         frames.append({n: cam.frame(ctx, n) for n in ("left", "right")})
     left, right = frames[0]["left"], frames[0]["right"]
     assert left.index == 1 and left.raw.shape == (72, 96)
@@ -115,13 +118,27 @@ def test_mission_stereo_pair_renders_terrain_and_is_deterministic(tmp_path, monk
     assert out.width() == 96 and out.height() == 72
 
 
+def test_camera_frames_arrive_delay_after_they_are_taken(small_site):
+    from lunar_drake.scenario_files import apply_overrides
+
+    scenario, site = small_site
+    s = apply_overrides(
+        scenario, "{sensors: {camera: {width: 48, height: 36, rate_hz: 2.0, delay_s: 0.7}}}"
+    )
+    _, _, cam, ctx = _camera_after(s, site, 0.69)
+    assert cam.frame(ctx, "left").index == -1  # frame 0 (t = 0) not delivered yet
+    _, _, cam, ctx = _camera_after(s, site, 1.75)
+    f = cam.frame(ctx, "left")  # frames 0..2 are due by 1.7 s; frame 3 (1.5 s) at 2.2 s
+    assert f.index == 2 and f.time_s == 1.0
+
+
 @pytest.mark.parametrize("engine", ["raycast", "heightfield"])
 def test_camera_inside_the_terrain_is_an_error(engine):
     from lunar_drake.errors import SimulationError
     from lunar_drake.systems.hapke_camera import CameraMount, HapkeCamera
 
     r = TerrainCameraRenderer(
-        heightfield=_flat(), model=CameraModel(width=32, height=24, engine=engine)
+        heightfield=_flat(), model=CameraConfig(width=32, height=24, engine=engine)
     )
     cam = HapkeCamera(renderer=r, mounts=[CameraMount("left", 0, RigidTransform())])
     ctx = cam.CreateDefaultContext()
@@ -140,24 +157,24 @@ def test_camera_inside_the_terrain_is_an_error(engine):
 
 def test_rover_spotlights_from_the_scenario():
     from lunar_drake.errors import ConfigError
-    from lunar_drake.scenario import load_scenario
+    from lunar_drake.scenario_files import load_scenario
 
     s = load_scenario(scenario_name="night")
-    assert len(s.camera.spotlights) == 2 and s.camera.spotlights[0].body == "chassis"
+    assert len(s.rover.lights) == 2 and s.rover.lights[0].body == "chassis"
     five = "[" + ", ".join(["{body: chassis}"] * 5) + "]"
     with pytest.raises(OutOfRangeError, match="at most 4"):
-        load_scenario(scenario_name="small", scenario_text=f"{{camera: {{spotlights: {five}}}}}")
+        load_scenario(scenario_name="small", scenario_text=f"{{rover: {{lights: {five}}}}}")
     with pytest.raises(ConfigError, match="inner_half_angle_deg"):
         load_scenario(
             scenario_name="small",
             scenario_text=(
-                "{camera: {spotlights: [{outer_half_angle_deg: 20, inner_half_angle_deg: 30}]}}"
+                "{rover: {lights: [{outer_half_angle_deg: 20, inner_half_angle_deg: 30}]}}"
             ),
         )
     # A lamp in the dark: its cone lights the ground below it, nothing outside.
     from lunar_drake.render.shading import SpotLight
 
-    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraModel(width=64, height=48))
+    r = TerrainCameraRenderer(heightfield=_flat(), model=CameraConfig(width=64, height=48))
     lamp = SpotLight(
         position_W=(0.0, 0.0, 2.0),
         direction_W=(0.0, 0.0, -1.0),
@@ -172,47 +189,37 @@ def test_rover_spotlights_from_the_scenario():
     assert img[24, 32] > 20 * img[2, 2]
 
 
-def test_mission_lamps_light_the_night_and_gimbal_looks_down(tmp_path, monkeypatch):
-    from pydrake.systems.analysis import Simulator
-
+def test_mission_lamps_light_the_night_and_gimbal_looks_down(small_site):
     from lunar_drake.diagrams.mission import MakeMissionDiagram
     from lunar_drake.errors import ConfigError
-    from lunar_drake.mission import load_site_layers
-    from lunar_drake.scenario import load_scenario
-    from lunar_drake.site import ensure_site
+    from lunar_drake.scenario_files import apply_overrides
 
-    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    scenario, site = small_site
     base = (
-        "{site: {epoch_utc: '2027-11-25T00:00:00'}, camera: {width: 64, height: 48, "
-        "rate_hz: 1.0, exposure_s: 0.05, gain: 4.0"
+        "{site: {epoch_utc: '2027-11-25T00:00:00'}, sensors: {camera: {width: 64, height: 48,"
+        " rate_hz: 1.0, exposure_s: 0.05, gain: 4.0}}"
     )
     means = []
-    for lamps in ("", ", spotlights: [{body: chassis, intensity_W_per_sr: 200.0}]"):
-        s = load_scenario(scenario_name="small", scenario_text=base + lamps + "}}")
-        hf, alb = load_site_layers(ensure_site(s, progress=False))
-        d = MakeMissionDiagram(scenario=s, heightfield=hf, albedo=alb, duration_s=2.0)
-        sim = Simulator(d)
-        sim.AdvanceTo(1.5)
-        cam = d.GetSubsystemByName("camera")
-        f = cam.frame(cam.GetMyContextFromRoot(sim.get_context()), "left")
+    for lamps in ("", ", rover: {lights: [{body: chassis, intensity_W_per_sr: 200.0}]}"):
+        s = apply_overrides(scenario, base + lamps + "}")
+        _, _, cam, ctx = _camera_after(s, site, 1.5)
+        f = cam.frame(ctx, "left")
         means.append(float(f.raw.mean()))
         # The gimbal points the pair at the ground ahead: mostly terrain in view.
         assert (f.label == 1).mean() > 0.5
     assert means[1] > 2.0 * means[0] + 1.0
-    bad = load_scenario(
-        scenario_name="small", scenario_text="{camera: {spotlights: [{body: bumper}]}}"
-    )
-    with pytest.raises(ConfigError, match="bumper"):
-        MakeMissionDiagram(scenario=bad, heightfield=hf, albedo=alb, duration_s=2.0)
+    bad = apply_overrides(scenario, "{rover: {lights: [{body: bumper}]}}")
+    with pytest.raises(ConfigError, match=r"rover\.lights\[0\]\.body = 'bumper'"):
+        MakeMissionDiagram(scenario=bad, site=site)
 
 
-def test_render_command_at_any_time(tmp_path, monkeypatch):
+def test_render_command_at_any_time(cache, tmp_path):
     from lunar_drake.render_cli import render_stereo
-    from lunar_drake.scenario import load_scenario
+    from lunar_drake.scenario_files import load_scenario
 
-    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
     s = load_scenario(
-        scenario_name="small", scenario_text="{camera: {width: 48, height: 32, rate_hz: 0.2}}"
+        scenario_name="small",
+        scenario_text="{sensors: {camera: {width: 48, height: 32, rate_hz: 0.2}}}",
     )
     paths = render_stereo(scenario=s, time_s=3.0, out_dir=tmp_path / "r", progress=False)
     names = {p.name for p in paths}
@@ -220,6 +227,7 @@ def test_render_command_at_any_time(tmp_path, monkeypatch):
     import json
 
     assert json.loads((tmp_path / "r" / "render.json").read_text())["time_s"] == 5.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r"]  # no temporary leftovers
 
 
 def test_lightmap_source_interpolates_baked_maps_lazily():

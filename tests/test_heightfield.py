@@ -241,7 +241,7 @@ def test_bad_queries_name_the_point(tmp_path):
     # the NaN hole covers pixel centres x in [-0.25, 0.25], y in [-0.75, -0.25]
     with pytest.raises(NoDataError, match=r"x=0\.1.*y=-0\.5"):
         hf.height([3.0, 0.1], [3.0, -0.5])
-    with pytest.raises(NoDataError, match=r"x=-1\.0"):
+    with pytest.raises(NoDataError, match=r"x=-1,"):
         hf.normal(-1.0, -0.5)  # 2x2 pixels are valid, but a neighbour used by the gradient is not
     assert np.isfinite(hf.height(-1.0, -0.5))
     # the same from a file: the message names the path

@@ -24,12 +24,12 @@ from lunar_drake.models.rover_description import (
     rover_preset,
 )
 from lunar_drake.models.rover_sdf import (
-    LUNAR_GRAVITY_MPS2,
     WHEELS,
     add_rover,
     rover_sdf,
     static_wheel_loads,
 )
+from lunar_drake.moon import GRAVITY_MPS2
 
 PRESETS = {"husky_rp": husky_rp, "krex2_rp": krex2_rp}
 
@@ -374,7 +374,7 @@ def test_add_rover_needs_an_unfinalized_plant_and_unique_names():
 def test_static_wheel_loads_balance_weight_and_moments(built):
     description, plant, _, rover = built
     loads = np.array(rover.static_wheel_load_N)
-    weight = description.total_mass_kg() * LUNAR_GRAVITY_MPS2
+    weight = description.total_mass_kg() * GRAVITY_MPS2
     assert loads.sum() == pytest.approx(weight, rel=1e-12)
     context = plant.CreateDefaultContext()
     np.testing.assert_allclose(static_wheel_loads(plant, rover, context=context), loads)
@@ -395,7 +395,7 @@ def test_static_wheel_loads_follow_the_centre_of_mass():
     heavy_front = dc.replace(base, mast_x_m=0.7, mast_mass_kg=60.0)
     l0 = np.array(build(base)[3].static_wheel_load_N)
     l1 = np.array(build(heavy_front)[3].static_wheel_load_N)
-    assert l1.sum() == pytest.approx(l0.sum() + 52.0 * LUNAR_GRAVITY_MPS2)
+    assert l1.sum() == pytest.approx(l0.sum() + 52.0 * GRAVITY_MPS2)
     assert l1[0] - l1[2] > l0[0] - l0[2] > 0
     # Differencing bar: both rockers carry the same front-rear torque.
     assert l1[0] - l1[2] == pytest.approx(l1[1] - l1[3])

@@ -1,44 +1,95 @@
-"""Scenario loading: named scenarios, overrides, unknown keys, ranges."""
+"""Scenario loading: named and bare scenarios, overrides, errors that name the file, the
+line and the full key, and OneOfEverything (every field set to a non-default value)."""
 
+import dataclasses as dc
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError
-from lunar_drake.scenario import (
-    Scenario,
+from lunar_drake.scenario import Scenario
+from lunar_drake.scenario_files import (
+    apply_overrides,
+    default_scenario_file,
     dump_scenario,
     load_scenario,
     scenario_from_text,
     scenario_names,
 )
 
+#: Fields OneOfEverything leaves at their default, with the reason ("[*]": any item).
+KEPT_AT_DEFAULT = {
+    "ground.route[*].vy_mps": "its rover is skid-steer (steering is non-default), which "
+    "cannot move sideways",
+}
+
+
+def _differs(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return not np.array_equal(np.asarray(a), np.asarray(b))
+    return a != b
+
+
+def _defaults_kept(obj, default, path="") -> list[str]:
+    """Leaf fields of ``obj`` equal to ``default``'s; items of lists of dataclasses are
+    compared with their class defaults."""
+    if dc.is_dataclass(obj) or hasattr(obj, "__fields__"):
+        names = [f.name for f in (dc.fields(obj) if dc.is_dataclass(obj) else obj.__fields__)]
+        out = []
+        for n in names:
+            out += _defaults_kept(getattr(obj, n), getattr(default, n), f"{path}{n}.")
+        return out
+    if isinstance(obj, list) and obj and dc.is_dataclass(obj[0]):
+        out = []
+        for item in obj:
+            out += _defaults_kept(item, type(item)(), f"{path[:-1]}[*].")
+        return out
+    return [] if _differs(obj, default) else [path[:-1]]
+
 
 def test_named_scenarios_load():
     names = scenario_names()
-    assert {"Defaults", "default", "small", "OneOfEverything"} <= set(names)
+    assert {"Defaults", "default", "small", "skid", "night", "OneOfEverything"} <= set(names)
     for n in names:
         s = load_scenario(scenario_name=n)
-        assert isinstance(s, Scenario)
+        assert isinstance(s, Scenario) and s.name == (
+            n if n != "OneOfEverything" else "one_of_everything"
+        )
 
 
 def test_defaults_equal_dataclass_defaults():
-    assert dump_scenario(load_scenario(scenario_name="Defaults")) == dump_scenario(Scenario())
+    s = load_scenario(scenario_name="Defaults")
+    assert dump_scenario(dc.replace(s, name="")) == dump_scenario(Scenario())
 
 
-def test_one_of_everything_sets_values():
+def test_one_of_everything_sets_every_field_to_a_non_default_value():
+    every = load_scenario(scenario_name="OneOfEverything")
+    same = sorted(set(_defaults_kept(every, Scenario())) - set(KEPT_AT_DEFAULT))
+    assert not same, f"OneOfEverything leaves these at their defaults: {same}"
+    assert every.rover.lights and every.ground.route  # list items are checked too
+
+
+def test_one_of_everything_builds_and_simulates_a_second(cache, tmp_path):
+    """Every option at once: a DEM upscaled from a file, a skid rover with a lamp, delayed
+    sensors, the raycast camera, an extra SPICE kernel, Drake config changes."""
+    from lunar_drake import metrics
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
     s = load_scenario(scenario_name="OneOfEverything")
-    assert s.terrain.sfd == "powerlaw"
-    assert s.terrain.powerlaw_exponent == -1.9
-    assert s.site.latitude_deg == -89.9
-    assert s.simulator_config.max_step_size == 0.01
-    assert s.visualization.publish_period == 0.05
-    assert s.camera.engine == "raycast"
-
-
-def test_unknown_camera_engine_is_rejected():
-    from lunar_drake.errors import ConfigError
-
-    with pytest.raises(ConfigError, match=r"camera\.engine = 'gpu'; allowed heightfield, raycast"):
-        load_scenario(scenario_name="small", scenario_text="{camera: {engine: gpu}}")
+    site = load_site(s, progress=False)
+    logs = simulate(scenario=s, site=site, frames_dir=tmp_path / "frames")
+    assert logs.stop_reason == "duration reached"
+    assert logs.simulated_s == pytest.approx(1.0)
+    summary = metrics.summarize(scenario=s, site=site, logs=logs)
+    assert summary["site"]["shape_px"] == [256, 256]  # 32 px DEM x 8
+    assert summary["rover"]["distance_m"] > 0.01  # it drove
+    assert summary["link"]["uplink"]["latency_s"] == [0.1, 0.1]
+    # Starts at 0.1 s: frames at 0.5 s (delivered 0.6 s) and 1.0 s (due after the end).
+    assert logs.frames_written == 1
+    imu = logs.vectors["rover.imu"]
+    assert np.abs(imu.data[-1]).max() > 0  # delayed samples arrived
 
 
 def test_round_trip_dump_load():
@@ -52,36 +103,113 @@ def test_overrides_apply_on_top():
     )
     assert s.random_seed == 99 and s.terrain.factor == 8
     assert s.terrain.size_px == 256  # untouched
+    t = apply_overrides(s, "{sensors: {imu: {delay_s: 0.02}}}")
+    assert t.sensors.imu.delay_s == 0.02 and t.sensors.imu.rate_hz == 100.0
+
+
+def test_a_run_scenario_file_is_a_bare_scenario(tmp_path):
+    s = load_scenario(scenario_name="small", scenario_text="{random_seed: 5}")
+    path = tmp_path / "scenario.yaml"
+    path.write_text(dump_scenario(s))
+    assert scenario_names(filename=path) == []
+    again = load_scenario(filename=path)
+    assert dump_scenario(again) == dump_scenario(s) and again.name == "small"
 
 
 @pytest.mark.parametrize(
-    "text, word",
+    "text, key",
     [
-        ("{terrain: {bogus_key: 1}}", "bogus_key"),
-        ("{not_a_section: {}}", "not_a_section"),
+        ("{terrain: {bogus_key: 1}}", "'terrain.bogus_key'"),
+        ("{not_a_section: {}}", "'not_a_section'"),
+        ("{rover: {description: {wheel_radius: 0.3}}}", "'rover.description.wheel_radius'"),
+        ("{sensors: {imu: {sample_rate_hz: 10}}}", "'sensors.imu.sample_rate_hz'"),
+        ("{ground: {route: [{duration_s: 1}, {speed: 2}]}}", "'ground.route[1].speed'"),
+        ("{plant_config: {time_stepp: 0.01}}", "'plant_config.time_stepp'"),
     ],
 )
-def test_unknown_keys_rejected(text, word):
-    with pytest.raises(ConfigError, match=word):
+def test_unknown_keys_are_named_with_their_full_path(text, key):
+    with pytest.raises(ConfigError, match=f"unknown key {key}".replace("[", r"\[")):
         load_scenario(scenario_text=text)
 
 
+def test_unknown_key_in_a_file_names_the_file_and_line(tmp_path):
+    f = tmp_path / "mine.yaml"
+    f.write_text("mission:\n  rover:\n    description:\n      wheel_radius: 0.3\n")
+    with pytest.raises(
+        ConfigError, match=r"mine\.yaml.*line 4.*'rover\.description\.wheel_radius'"
+    ):
+        load_scenario(filename=f, scenario_name="mission")
+
+
+def test_malformed_yaml_names_the_file_and_line(tmp_path):
+    f = tmp_path / "bad.yaml"
+    f.write_text("default:\n  random_seed: [1\n")
+    with pytest.raises(ConfigError, match=r"bad\.yaml, line 3: malformed YAML"):
+        load_scenario(filename=f)
+    with pytest.raises(ConfigError, match=r"--scenario-text, line 1: malformed YAML"):
+        load_scenario(scenario_text="{random_seed: [")
+
+
+def test_yaml_never_executes_code(tmp_path):
+    marker = tmp_path / "pwned"
+    f = tmp_path / "evil.yaml"
+    f.write_text(f'default:\n  random_seed: !!python/object/apply:os.system ["touch {marker}"]\n')
+    with pytest.raises(ConfigError, match=r"evil\.yaml, line 2: YAML tag .*python.* not allowed"):
+        load_scenario(filename=f)
+    assert not marker.exists()
+    with pytest.raises(ConfigError, match="not allowed"):
+        load_scenario(scenario_text="{name: !!python/name:os.system }")
+
+
+def test_missing_file_and_name():
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_scenario(filename="/no/such/file.yaml")
+    with pytest.raises(LunarDrakeError, match="'nope' not found"):
+        load_scenario(scenario_name="nope")
+
+
 @pytest.mark.parametrize(
-    "text, word",
+    "text, message",
     [
         ("{terrain: {factor: 3}}", "terrain.factor = 3"),
-        ("{terrain: {sfd: lunar}}", "'lunar'"),
-        ("{terrain: {resolution_m: -0.1}}", "terrain.resolution_m = -0.1"),
-        ("{terrain: {rock_abundance: 1.5}}", "terrain.rock_abundance = 1.5"),
+        ("{terrain: {sfd: lunar}}", "terrain.sfd = 'lunar'"),
+        ("{terrain: {resolution_m: -0.1}}", "terrain.resolution_m = -0.1 is out of range"),
         ("{simulation_duration: -2}", "simulation_duration = -2"),
         ("{site: {latitude_deg: -95}}", "site.latitude_deg = -95"),
-        ("{terrain: {min_crater_m: 2.0, max_crater_m: 1.0}}", "terrain.max_crater_m = 1.0"),
-        ("{terrain: {size_px: 1000, factor: 64}}", "multiple"),
+        ("{terrain: {min_crater_m: 2.0, max_crater_m: 1.0}}", "terrain.max_crater_m = 1 must"),
+        ("{sensors: {imu: {rate_hz: 0}}}", "sensors.imu.rate_hz = 0 is out of range"),
+        ("{sensors: {camera: {engine: gpu}}}", "sensors.camera.engine = 'gpu' is unknown"),
+        ("{sensors: {camera: {width: 8}}}", "sensors.camera.width = 8 is out of range"),
+        ("{soil: {phi: 2.0}}", "soil.phi = 2"),
+        ("{rover: {description: {wheel_radius_m: -1}}}", "rover.description.wheel_radius_m"),
+        ("{comms: {uplink: {delay_s: -1}}}", "comms.uplink.delay_s = -1"),
+        ("{flight: {gimbal: {lookahead_m: 0.1}}}", "flight.gimbal.lookahead_m = 0.1"),
+        ("{ground: {route: [{duration_s: -1}]}}", r"ground.route\[0\].duration_s = -1"),
+        ("{logging: {period_s: 0}}", "logging.period_s = 0"),
+        ("{rover: {lights: [{body: chassis, xyz: [1, 2]}]}}", r"rover.lights\[0\]: xyz"),
     ],
 )
-def test_out_of_range_rejected(text, word):
-    with pytest.raises(ConfigError, match=word.replace(".", r"\.").replace("(", r"\(")):
+def test_out_of_range_values_name_the_scenario_key(text, message):
+    with pytest.raises(ConfigError, match=message.replace(".", r"\.").replace(r"\\.", r"\.")):
         load_scenario(scenario_text=text)
+
+
+def test_messages_round_numbers():
+    with pytest.raises(OutOfRangeError) as err:
+        load_scenario(scenario_text="{terrain: {resolution_m: -0.30000000000000004}}")
+    assert "-0.3 is out of range" in str(err.value)
+
+
+def test_skid_rover_cannot_be_routed_sideways():
+    with pytest.raises(ConfigError, match=r"ground\.route\[0\]\.vy_mps = 0\.1: a skid-steer"):
+        load_scenario(scenario_name="skid", scenario_text="{ground: {route: [{vy_mps: 0.1}]}}")
+
+
+def test_relative_paths_resolve_against_the_scenario_file():
+    s = load_scenario(scenario_name="OneOfEverything")
+    here = default_scenario_file().parent
+    assert Path(s.terrain.dem).is_absolute() and Path(s.terrain.dem).parent.parent == here
+    assert all(Path(k).is_file() for k in s.lighting.extra_kernels)
 
 
 def test_errors_are_value_errors_and_lunar_errors():
@@ -89,7 +217,3 @@ def test_errors_are_value_errors_and_lunar_errors():
         load_scenario(scenario_text="{terrain: {factor: 3}}")
     with pytest.raises(OutOfRangeError):
         load_scenario(scenario_text="{terrain: {resolution_m: 0}}")
-    with pytest.raises(LunarDrakeError, match="nope"):
-        load_scenario(scenario_name="nope")
-    with pytest.raises(ConfigError, match="does not exist"):
-        load_scenario(filename="/no/such/file.yaml")

@@ -11,7 +11,6 @@ from scipy.integrate import quad
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.terramechanics import (
     GRC1,
-    LUNAR_GRAVITY_MPS2,
     LUNAR_REGOLITH,
     ImmobilizedError,
     SoilParams,
@@ -33,10 +32,11 @@ from lunar_drake.dynamics.terramechanics import (
     travel_direction,
     wheel_forces,
 )
-from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError
+from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, format_value
+from lunar_drake.moon import GRAVITY_MPS2
 
 WHEEL = WheelParams(radius_m=0.25, width_m=0.2)
-W_WHEEL = 50.0 * LUNAR_GRAVITY_MPS2  # 81 N: a ~50 kg-per-wheel rover on the Moon
+W_WHEEL = 50.0 * GRAVITY_MPS2  # 81 N: a ~50 kg-per-wheel rover on the Moon
 PRESETS = (LUNAR_REGOLITH, GRC1)
 
 
@@ -222,7 +222,7 @@ def test_contact_stiffness_and_damping_ratio():
     np.testing.assert_allclose(contact_stiffness(z, **kw), numeric, rtol=1e-6)
     assert contact_stiffness(-0.01, **kw) == 0.0
     # d(z) = 2 zeta sqrt(k(z) m) with m = W(z)/g: the damping ratio is zeta at every z.
-    m = bekker_load(z, **kw) / LUNAR_GRAVITY_MPS2
+    m = bekker_load(z, **kw) / GRAVITY_MPS2
     zeta = contact_damping(z, **kw) / (2.0 * np.sqrt(contact_stiffness(z, **kw) * m))
     np.testing.assert_allclose(zeta, LUNAR_REGOLITH.damping_ratio, rtol=1e-12)
     # The damping term is linear in z_dot: N(z, zd) = W(z) + d(z) zd (when positive).
@@ -437,7 +437,7 @@ def test_soil_out_of_range_raises_naming_field_and_value(field, value):
         SoilParams(**{field: value})
     msg = str(info.value)
     assert msg.startswith(f"{field} = ")
-    assert repr(value) in msg
+    assert format_value(value) in msg
 
 
 def test_soil_combined_and_type_errors():
@@ -466,12 +466,13 @@ def test_soil_combined_and_type_errors():
 def test_wheel_out_of_range_raises(field, value):
     with pytest.raises(OutOfRangeError) as info:
         WheelParams(**{field: value})
-    assert str(info.value).startswith(f"{field} = {value!r}")
+    assert str(info.value).startswith(f"{field} = {format_value(value)}")
 
 
 def test_presets():
-    assert soil_preset("lunar_regolith") is LUNAR_REGOLITH
-    assert soil_preset("GRC-1") is GRC1 and soil_preset("grc1") is GRC1
+    assert soil_preset("lunar_regolith") == LUNAR_REGOLITH
+    assert soil_preset("lunar_regolith") is not LUNAR_REGOLITH  # a copy: configs are mutable
+    assert soil_preset("GRC-1") == GRC1 and soil_preset("grc1") == GRC1
     with pytest.raises(ConfigError, match=r"'mars'.*\['grc1', 'lunar_regolith'\]"):
         soil_preset("mars")
     # Wong's lunar soil values.
@@ -480,3 +481,175 @@ def test_presets():
     assert math.degrees(LUNAR_REGOLITH.phi) == pytest.approx(35.0)
     assert 1600.0 <= GRC1.density <= 1890.0  # within GRC-1's min/max densities
     assert tm.SOIL_PRESETS["grc1"] is GRC1
+
+
+# ------------------------------------------------------------ static shear patch (stiction)
+def test_patch_length_and_strength_hand_computed():
+    # z = 0.01 m, r = 0.25 m: cos(theta_1) = 1 - 0.01/0.25 = 0.96, sin(theta_1) = 0.28,
+    # L = r sin(theta_1) = 0.07 m (no rear contact).
+    L = tm.patch_length(np.array([0.01, 0.0, -0.02]), wheel=WHEEL, soil=LUNAR_REGOLITH)
+    np.testing.assert_allclose(L, [0.07, 0.0, 0.0], atol=1e-15)
+    # Rear contact: theta_2 = -0.5 theta_1 adds r sin(0.5 theta_1).
+    rebound = SoilParams(name="rebound", rear_angle_ratio=0.5)
+    th1 = math.acos(0.96)
+    assert tm.patch_length(np.array([0.01]), wheel=WHEEL, soil=rebound)[0] == pytest.approx(
+        0.25 * (0.28 + math.sin(0.5 * th1)), rel=1e-12
+    )
+    # F_max = c b L + N tan(phi) = 170 * 0.2 * 0.07 + 100 * 0.70020754 = 2.38 + 70.020754
+    #       = 72.400754 N; out of contact (L = 0, N = 0): 0; a negative N counts as 0.
+    fmax = tm.patch_strength(
+        np.array([100.0, 0.0, -5.0]), np.array([0.07, 0.0, 0.07]), wheel=WHEEL, soil=LUNAR_REGOLITH
+    )
+    np.testing.assert_allclose(fmax, [72.400754, 0.0, 2.38], rtol=1e-8)
+
+
+def _static(j, u=(0.0, 0.0), N=100.0, L=0.07, soil=LUNAR_REGOLITH, **kw):
+    return tm.patch_static_force(
+        np.atleast_2d(np.asarray(j, float)),
+        slip_velocity=np.atleast_2d(np.asarray(u, float)),
+        N=np.array([N]),
+        length=np.array([L]),
+        wheel=WHEEL,
+        soil=soil,
+        **kw,
+    )[0]
+
+
+def test_patch_static_force_matches_hand_computed_mohr_coulomb_janosi_hanamoto():
+    # F_max = 72.400754 N (previous test). Janosi-Hanamoto in the displacement:
+    # j_x = K = 0.018 m: F_x = -F_max (1 - e^-1) = -72.400754 * 0.63212056 = -45.766005 N.
+    np.testing.assert_allclose(_static([0.018, 0.0]), [-45.766005, 0.0], rtol=1e-7, atol=1e-12)
+    # j_y = -2 K_y: F_y = +F_max (1 - e^-2) = 72.400754 * 0.86466472 = 62.602377 N.
+    np.testing.assert_allclose(_static([0.0, -0.036]), [0.0, 62.602377], rtol=1e-7, atol=1e-12)
+    # Both axes share one envelope (K = K_y here): j = K (0.6, 0.8), |j| = K, so
+    # |F| = F_max (1 - e^-1) = 45.766005 N along -(0.6, 0.8).
+    np.testing.assert_allclose(
+        _static([0.6 * 0.018, 0.8 * 0.018]), [-0.6 * 45.766005, -0.8 * 45.766005], rtol=1e-7
+    )
+    # Anisotropic moduli: K_y = 2 K, j = (K, 2 K) -> rho = sqrt(2); F = -F_max (1 -
+    # e^-rho) (1, 1) / rho = -72.400754 * 0.75688326 / 1.41421356 (1, 1) = -38.748687 (1, 1).
+    aniso = SoilParams(name="aniso", K_y=0.036)
+    np.testing.assert_allclose(_static([0.018, 0.036], soil=aniso), [-38.748687] * 2, rtol=1e-7)
+    # Bristle damping: c_x = 2 zeta sqrt(F_max / K * N / g)
+    #   = 2 sqrt(72.400754 / 0.018 * 100 / 1.62) = 996.56993 N s/m; u_x = 1 mm/s -> -0.99657 N.
+    np.testing.assert_allclose(_static([0.0, 0.0], u=[1e-3, 0.0]), [-0.99656993, 0.0], rtol=1e-7)
+    np.testing.assert_allclose(
+        _static([0.0, 0.0], u=[1e-3, 0.0], damping_ratio=0.5), [-0.49828497, 0.0], rtol=1e-7
+    )
+    # Coulomb cap: never more than the strength, whatever the slip velocity.
+    f = _static([0.0, 0.0], u=[5.0, 5.0])
+    np.testing.assert_allclose(f, [-72.400754 / math.sqrt(2)] * 2, rtol=1e-8)
+    f = _static([0.05, 0.0], u=[5.0, 5.0])
+    assert math.hypot(*f) == pytest.approx(72.400754, rel=1e-8) and f[0] < f[1] < 0.0
+    # Out of contact (no load, no patch): nothing.
+    np.testing.assert_array_equal(_static([0.01, 0.01], u=[1.0, 1.0], N=0.0, L=0.0), [0.0, 0.0])
+    # At rest with no displacement: exactly zero.
+    np.testing.assert_array_equal(_static([0.0, 0.0]), [0.0, 0.0])
+
+
+def test_patch_update_integrates_at_rest_relaxes_when_rolling_and_saturates():
+    soil, dt = LUNAR_REGOLITH, 0.01
+    j0 = np.array([[0.02, -0.01]])
+    u = np.array([[1e-3, 2e-3]])
+
+    def step(j, vr, L=0.07, u=u, dt=dt):
+        return tm.update_patch_displacement(
+            j,
+            slip_velocity=u,
+            rolling_speed=np.array([vr]),
+            length=np.array([L]),
+            dt=dt,
+            soil=soil,
+        )
+
+    # At rest: integrates the creep, j + u dt (exactly).
+    np.testing.assert_array_equal(step(j0, 0.0), j0 + u * dt)
+    # Rolling at 0.2 m/s over L = 0.07 m: a = v / L, exact exponential step:
+    # e^(-a dt) = 0.97183288, (1 - e^(-a dt)) / a = 0.00985849 s.
+    a = 0.2 / 0.07
+    expected = j0 * math.exp(-a * dt) + u * (1 - math.exp(-a * dt)) / a
+    np.testing.assert_allclose(step(j0, 0.2), expected, rtol=1e-12)
+    np.testing.assert_allclose(step(j0, -0.2), expected, rtol=1e-12)  # either direction
+    # Unconditionally stable: any step tends monotonically to u L / |v|, never overshoots.
+    np.testing.assert_allclose(step(j0, 0.2, dt=1e3), u * 0.07 / 0.2, rtol=1e-12)
+    j = j0.copy()
+    for _ in range(2000):
+        j = step(j, 0.2)
+    np.testing.assert_allclose(j, u * 0.07 / 0.2, rtol=1e-9)
+    # Elasto-plastic: beyond 4 moduli the displacement is projected back onto the
+    # ellipse (direction kept): the patch slides.
+    big = step(np.array([[0.3, 0.4]]), 0.0, u=np.zeros((1, 2)))
+    np.testing.assert_allclose(big, [[0.6 * 4 * 0.018, 0.8 * 4 * 0.018]], rtol=1e-12)
+    assert step(big, 0.0, u=np.array([[1.0, 0.0]]))[0, 0] <= 4 * 0.018 + 1e-15
+    np.testing.assert_allclose(
+        tm.update_patch_displacement(
+            big,
+            slip_velocity=np.zeros((1, 2)),
+            rolling_speed=np.zeros(1),
+            length=np.array([0.07]),
+            dt=dt,
+            soil=soil,
+            saturation_moduli=2.0,
+        ),
+        [[0.6 * 2 * 0.018, 0.8 * 2 * 0.018]],
+        rtol=1e-12,
+    )
+    # Out of contact: fresh soil.
+    np.testing.assert_array_equal(step(j0, 0.0, L=0.0), [[0.0, 0.0]])
+
+
+def test_patch_functions_are_vectorized_over_wheels():
+    rng = np.random.default_rng(7)
+    n = 6
+    j = rng.normal(scale=0.03, size=(n, 2))
+    u = rng.normal(scale=0.01, size=(n, 2))
+    vr = rng.normal(scale=0.05, size=n)
+    vr[0] = 0.0
+    L = rng.uniform(0.0, 0.1, size=n)
+    L[1] = 0.0
+    N = rng.uniform(0.0, 150.0, size=n)
+    kw = dict(wheel=WHEEL, soil=LUNAR_REGOLITH)
+    J = tm.update_patch_displacement(
+        j, slip_velocity=u, rolling_speed=vr, length=L, dt=0.01, soil=LUNAR_REGOLITH
+    )
+    F = tm.patch_static_force(j, slip_velocity=u, N=N, length=L, **kw)
+    for i in range(n):
+        Ji = tm.update_patch_displacement(
+            j[i : i + 1],
+            slip_velocity=u[i : i + 1],
+            rolling_speed=vr[i : i + 1],
+            length=L[i : i + 1],
+            dt=0.01,
+            soil=LUNAR_REGOLITH,
+        )
+        np.testing.assert_array_equal(J[i], Ji[0])
+        Fi = tm.patch_static_force(
+            j[i : i + 1], slip_velocity=u[i : i + 1], N=N[i : i + 1], length=L[i : i + 1], **kw
+        )
+        np.testing.assert_array_equal(F[i], Fi[0])
+    np.testing.assert_array_equal(
+        tm.patch_slip_velocity(
+            v_x=np.array([0.1, 0.0]), v_y=np.array([0.01, -0.02]), omega_r=np.array([0.12, 0.0])
+        ),
+        np.array([[0.1 - 0.12, 0.01], [0.0, -0.02]]),
+    )
+
+
+def test_static_weight_blend_and_patch_params():
+    p = tm.ShearPatchParams()
+    v = np.array([0.0, 0.005, 0.01, 0.015, 0.02, 0.05, -0.005, -0.015, -0.3])
+    w = tm.static_weight(v, patch=p)
+    # Exactly 1 at and below 1 cm/s, exactly 0 at and above 2 cm/s, 1/2 half way.
+    np.testing.assert_array_equal(w[[0, 1, 2, 6]], 1.0)
+    np.testing.assert_array_equal(w[[4, 5, 8]], 0.0)
+    assert w[3] == pytest.approx(0.5) and w[7] == pytest.approx(0.5)
+    grid = np.linspace(0.0, 0.03, 301)
+    assert np.all(np.diff(tm.static_weight(grid, patch=p)) <= 0.0)
+    with pytest.raises(OutOfRangeError, match="dynamic_speed_mps"):
+        tm.ShearPatchParams(static_speed_mps=0.02, dynamic_speed_mps=0.02)
+    with pytest.raises(OutOfRangeError, match="damping_ratio"):
+        tm.ShearPatchParams(damping_ratio=0.0)
+    with pytest.raises(OutOfRangeError, match="saturation_moduli"):
+        tm.ShearPatchParams(saturation_moduli=0.5)
+    with pytest.raises(ConfigError, match="static_speed_mps"):
+        tm.ShearPatchParams(static_speed_mps="slow")

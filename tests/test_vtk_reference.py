@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from lunar_drake.errors import ConfigError
-from lunar_drake.render.vtk_reference import (
+from benchmarks.vtk_reference import (
     VtkReferenceCamera,
     albedo_texture,
     vertex_normals,
     write_terrain_obj,
 )
+from lunar_drake.errors import ConfigError
 
 
 def _grid(n=9, spacing=0.1, slope=0.0):

@@ -8,19 +8,14 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 from pydrake.multibody.math import SpatialVelocity
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-from lunar_drake.diagrams.rover import add_rover_model, spawn_pose, wire_rover
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import FootprintSampling, wheel_contact_geometry
 from lunar_drake.errors import ConfigError, NoDataError, OutOfBoundsError, OutOfRangeError
 from lunar_drake.models.rover_description import rover_preset
-from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
-from lunar_drake.systems.rover_kinematics import TwistSchedule
-from lunar_drake.systems.terrain_source import TerrainSource
+from lunar_drake.models.rover_sdf import level_wheel_loads
+from lunar_drake.models.spawn import spawn_pose
+from lunar_drake.moon import GRAVITY_MPS2
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS, WheelRegolithContact
 from lunar_drake.terrain.heightfield import Heightfield
 
@@ -122,84 +117,76 @@ def test_normal_force_is_continuous_at_contact_onset():
     assert abs(F.rotational()[1]) < 1e-9
 
 
-def _rover_sim(*, preset="krex2_rp", hf=None, twist=(0.0, 0.0, 0.0), dt=0.01, x0=-2.0):
-    hf = hf or _plane(n=240, res=0.05)
-    b = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=dt, discrete_contact_approximation="sap"), b
-    )
-    plant.mutable_gravity_field().set_gravity_vector([0, 0, -LUNAR_GRAVITY_MPS2])
-    rover = add_rover_model(plant, description=rover_preset(preset))
-    plant.Finalize()
-    terrain = b.AddSystem(TerrainSource(heightfield=hf))
-    h = wire_rover(
-        b, plant=plant, rover=rover, heightfield_port=terrain.heightfield_output, soil=SOIL, seed=3
-    )
-    sched = b.AddSystem(TwistSchedule(segments=[(1.0, 0, 0, 0), (100.0, *twist)]))
-    b.Connect(sched.twist_output, h.kinematics.twist_input)
-    g = b.AddSystem(ConstantVectorSource(np.zeros(2)))
-    b.Connect(g.get_output_port(), h.kinematics.gimbal_input)
-    logs = {
-        "pose": LogVectorOutput(h.truth.pose_output, b, 0.05),
-        "wheels": LogVectorOutput(h.contact.wheel_state_output, b, 0.05),
-        "enc": LogVectorOutput(h.encoders.GetOutputPort("angles"), b, 0.05),
-    }
-    d = b.Build()
-    sim = Simulator(d)
-    ctx = sim.get_mutable_context()
-    X = spawn_pose(heightfield=hf, rover=rover, x_m=x0, y_m=0.0, yaw_rad=0.0, soil=SOIL)
-    plant.SetFloatingBaseBodyPoseInWorldFrame(
-        plant.GetMyMutableContextFromRoot(ctx), rover.chassis, X
-    )
-    sim.Initialize()
-    return sim, ctx, logs, rover, h
+def _rover_sim(*, preset="krex2_rp", hf=None, twist=(0.0, 0.0, 0.0), dt=0.01, x0=-2.0, t=3.0):
+    """The mission (plant, flight, ground, zero-delay link) on a plane: 1 s standing,
+    then ``twist``; returns the logs (truth pose and wheel state, encoders)."""
+    from lunar_drake.scenario import RouteSegment, Scenario
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import SiteData
+
+    s = Scenario(name="plane")
+    s.simulation_duration = t
+    s.random_seed = 3
+    s.rover.description = rover_preset(preset)
+    s.rover.spawn_x_m = x0
+    s.ground.route = [RouteSegment(duration_s=1.0), RouteSegment(100.0, *twist)]
+    s.comms.uplink.delay_s = s.comms.downlink.delay_s = 0.0
+    s.logging.period_s = 0.05
+    s.plant_config.time_step = dt
+    logs = simulate(scenario=s, site=SiteData.from_heightfield(hf or _plane(n=240, res=0.05)))
+    return logs, s.rover.description
 
 
 def test_rover_rests_in_static_equilibrium():
-    sim, ctx, logs, rover, _ = _rover_sim()
-    sim.AdvanceTo(3.0)
-    pose = logs["pose"].FindLog(ctx).data()
-    ws = logs["wheels"].FindLog(ctx).data()
+    logs, desc = _rover_sim(t=3.0)
+    pose = logs.vectors["truth.pose"].data
+    ws = logs.vectors["truth.wheel_state"].data
     nf = len(WHEEL_STATE_FIELDS)
-    total_n = ws[1::nf, -1].sum()
-    assert total_n == pytest.approx(rover.total_mass_kg * LUNAR_GRAVITY_MPS2, rel=0.01)
+    total_n = ws[-1, 1::nf].sum()
+    mass = (
+        sum(getattr(desc, f) for f in ("chassis_mass_kg", "mast_mass_kg", "gimbal_mass_kg"))
+        + desc.solar_panel_mass_kg
+    )
+    assert mass > 0
+    assert total_n == pytest.approx(desc.total_mass_kg() * GRAVITY_MPS2, rel=0.01)
     # At rest: no drift, level, wheels at their static sinkage.
-    assert np.abs(pose[6:9, -1]).max() < 1e-3
-    assert np.abs(pose[0, -1] - pose[0, 0]) < 5e-3
-    z_static = tm.static_sinkage(np.asarray(rover.static_wheel_load_N), wheel=WHEEL, soil=SOIL)
-    np.testing.assert_allclose(ws[0::nf, -1], z_static, rtol=0.05)
+    assert np.abs(pose[-1, 6:9]).max() < 1e-3
+    assert np.abs(pose[-1, 0] - pose[0, 0]) < 5e-3
+    z_static = tm.static_sinkage(np.asarray(level_wheel_loads(desc)), wheel=_wheel(desc), soil=SOIL)
+    np.testing.assert_allclose(ws[-1, 0::nf], z_static, rtol=0.05)
+
+
+def _wheel(desc):
+    return tm.WheelParams(radius_m=desc.wheel_radius_m, width_m=desc.wheel_width_m)
 
 
 @pytest.mark.parametrize("preset", ["krex2_rp", "husky_rp"])
 def test_rover_drives_straight_with_reference_slip_on_flat_ground(preset):
-    sim, ctx, logs, rover, h = _rover_sim(preset=preset, twist=(0.15, 0.0, 0.0))
-    sim.AdvanceTo(12.0)
-    t = logs["pose"].FindLog(ctx).sample_times()
-    pose = logs["pose"].FindLog(ctx).data()
-    enc = logs["enc"].FindLog(ctx).data()
+    logs, desc = _rover_sim(preset=preset, twist=(0.15, 0.0, 0.0), t=12.0)
+    t = logs.vectors["truth.pose"].times
+    pose = logs.vectors["truth.pose"].data
+    enc = logs.vectors["rover.wheel_encoders"].data
     i0, i1 = np.searchsorted(t, 4.0), len(t) - 1
-    gt = np.linalg.norm(pose[:3, i1] - pose[:3, i0])
-    dr = np.mean(enc[:, i1] - enc[:, i0]) * rover.description.wheel_radius_m
+    gt = np.linalg.norm(pose[i1, :3] - pose[i0, :3])
+    dr = np.mean(enc[i1] - enc[i0]) * desc.wheel_radius_m
     slip = 1 - gt / dr
     ref = tm.reference_slip(
-        slope_rad=0.0, wheel_loads_N=rover.static_wheel_load_N, wheel=h.wheel, soil=SOIL
+        slope_rad=0.0, wheel_loads_N=level_wheel_loads(desc), wheel=_wheel(desc), soil=SOIL
     )
     assert slip == pytest.approx(ref, abs=0.01)
-    assert abs(pose[1, i1]) < 0.02 and abs(pose[5, i1]) < math.radians(1.0)
+    assert abs(pose[i1, 1]) < 0.02 and abs(pose[i1, 5]) < math.radians(1.0)
 
 
 def test_point_turn_and_crab_on_explicit_rover():
-    sim, ctx, logs, *_ = _rover_sim(twist=(0.0, 0.0, 0.1))
-    sim.AdvanceTo(8.0)
-    pose = logs["pose"].FindLog(ctx).data()
-    assert pose[5, -1] > 0.3  # turned left in place
-    assert np.hypot(pose[0, -1] - pose[0, 0], pose[1, -1] - pose[1, 0]) < 0.1
-    sim, ctx, logs, *_ = _rover_sim(twist=(0.0, 0.1, 0.0))
-    sim.AdvanceTo(8.0)
-    pose = logs["pose"].FindLog(ctx).data()
-    assert pose[1, -1] - pose[1, 0] > 0.3  # crabbed left
+    logs, _ = _rover_sim(twist=(0.0, 0.0, 0.1), t=8.0)
+    pose = logs.vectors["truth.pose"].data
+    assert pose[-1, 5] > 0.3  # turned left in place
+    assert np.hypot(pose[-1, 0] - pose[0, 0], pose[-1, 1] - pose[0, 1]) < 0.1
+    logs, _ = _rover_sim(twist=(0.0, 0.1, 0.0), t=8.0)
+    pose = logs.vectors["truth.pose"].data
+    assert pose[-1, 1] - pose[0, 1] > 0.3  # crabbed left
     # Some yaw while the wheels swing to 90 deg (they drive as they steer).
-    assert abs(pose[5, -1]) < math.radians(5)
+    assert abs(pose[-1, 5]) < math.radians(5)
 
 
 def test_spawn_errors_are_clear():
@@ -219,10 +206,12 @@ def test_spawn_errors_are_clear():
 
 
 def test_bad_rover_and_soil_values_are_rejected():
-    from lunar_drake.scenario import load_scenario
+    from lunar_drake.scenario_files import load_scenario
 
-    with pytest.raises(ConfigError, match=r"rover\.soil = 'sand'"):
+    with pytest.raises(ConfigError, match=r"unknown key 'rover\.soil'"):
         load_scenario(scenario_name="small", scenario_text="{rover: {soil: sand}}")
+    with pytest.raises(OutOfRangeError, match=r"soil\.k_phi = -5 is out of range"):
+        load_scenario(scenario_name="small", scenario_text="{soil: {k_phi: -5}}")
     with pytest.raises(ConfigError, match="steering"):
         load_scenario(
             scenario_name="small", scenario_text="{rover: {description: {steering: tracked}}}"
@@ -242,30 +231,27 @@ def test_bad_rover_and_soil_values_are_rejected():
 def test_skid_scenario_matches_the_husky_preset():
     import dataclasses as dc
 
-    from lunar_drake.scenario import load_scenario
+    from lunar_drake.scenario_files import load_scenario
 
     assert dc.asdict(load_scenario(scenario_name="skid").rover.description) == dc.asdict(
         rover_preset("husky_rp")
     )
 
 
-def test_driving_off_the_raster_ends_the_run_cleanly(tmp_path, monkeypatch):
-    from lunar_drake.mission import run_mission
-    from lunar_drake.scenario import load_scenario
+def test_driving_off_the_raster_ends_the_run_cleanly(small_site):
+    from lunar_drake.scenario_files import apply_overrides
+    from lunar_drake.simulation import simulate
 
-    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
-    s = load_scenario(
-        scenario_name="small",
-        scenario_text=(
-            "{rover: {spawn_x_m: 9.0, route: [{duration_s: 1.0}, {duration_s: 60, vx_mps: 0.5}]}}"
-        ),
+    scenario, site = small_site
+    s = apply_overrides(
+        scenario,
+        "{simulation_duration: 40.0, rover: {spawn_x_m: 9.0}, sensors: {camera: {enabled: false}},"
+        " ground: {route: [{duration_s: 1.0}, {duration_s: 60, vx_mps: 0.5}]}}",
     )
-    result = run_mission(
-        scenario=s, scenario_name="small", out_dir=tmp_path / "run", duration=40.0, progress=False
-    )
-    assert "left the terrain" in result.summary["stop_reason"]
-    assert result.summary["simulated_s"] < 40.0
-    assert (tmp_path / "run" / "truth.csv").exists()
+    logs = simulate(scenario=s, site=site)
+    assert "left the terrain" in logs.stop_reason
+    assert logs.simulated_s < 40.0
+    assert len(logs.vectors["truth.pose"].times) > 10
 
 
 def test_slip_study_matches_reference_and_is_deterministic(tmp_path):
@@ -314,12 +300,8 @@ def test_rolling_wheel_has_no_slip():
     assert st["slip"] == pytest.approx(0.0, abs=1e-12)
 
 
-def test_scenario_rejects_bad_epoch_and_skid_sideways_route():
-    from lunar_drake.scenario import load_scenario
+def test_scenario_rejects_bad_epoch():
+    from lunar_drake.scenario_files import load_scenario
 
     with pytest.raises(ConfigError, match="epoch_utc"):
         load_scenario(scenario_name="small", scenario_text="{site: {epoch_utc: yesterday}}")
-    with pytest.raises(ConfigError, match="skid-steer"):
-        load_scenario(
-            scenario_name="skid", scenario_text="{rover: {route: [{duration_s: 1, vy_mps: 0.1}]}}"
-        )

@@ -81,6 +81,7 @@ __all__ = [
     "explicit_steer_twist",
     "skid_steer_twist",
     "skid_steer_wheel_speeds",
+    "wheel_geometry_for",
     "wheel_servo_gains",
 ]
 
@@ -467,3 +468,32 @@ def wheel_servo_gains(
     ratio = math.sqrt(1.0 - 2.0 * z2 + math.sqrt(4.0 * z2 * z2 - 4.0 * z2 + 2.0))
     wn = 2.0 * math.pi * bandwidth_hz / ratio
     return ServoGains(kp=inertia * wn * wn, kd=2.0 * damping_ratio * wn * inertia)
+
+
+def wheel_geometry_for(description) -> WheelGeometry:
+    """Kinematic wheel geometry of a :class:`~lunar_drake.models.rover_description.
+    RoverDescription` (body frame = chassis frame C).
+
+    Skid: wheel centres, no steering. Explicit: steering axes ``steering_offset_m``
+    inboard of the wheel centres; offsets signed along each wheel's left axis.
+    """
+    wc = np.asarray(description.wheel_centres_C(), dtype=float)[:, :2]
+    if description.steering == "skid":
+        return WheelGeometry(
+            p_BS=wc,
+            wheel_radius=description.wheel_radius_m,
+            steering_offset=0.0,
+            steering_limit=0.0,
+            steerable=False,
+        )
+    o = float(description.steering_offset_m)
+    side = np.sign(wc[:, 1])
+    p = wc.copy()
+    p[:, 1] -= side * o
+    return WheelGeometry(
+        p_BS=p,
+        wheel_radius=description.wheel_radius_m,
+        steering_offset=side * o,
+        steering_limit=float(description.steering_limit_rad),
+        steerable=True,
+    )

@@ -1,9 +1,12 @@
-"""Rigid-wheel terramechanics core: Bekker sinkage, Wong-Reece stresses, Janosi-Hanamoto shear.
+"""Rigid-wheel terramechanics core: Bekker sinkage, Wong-Reece stresses, Janosi-Hanamoto shear,
+and a static shear patch that holds a wheel at rest.
 
-Pure numpy/scipy (no Drake). A LeafSystem calls :func:`normal_force` and
-:func:`wheel_forces` once per plant step for all wheels at once, so every per-step
-function takes arrays (one entry per wheel), uses closed forms or a fixed 24-node
-Gauss-Legendre quadrature, and has no Python loop over wheels and no root finding.
+Pure numpy/scipy (no Drake). A LeafSystem calls :func:`normal_force`,
+:func:`wheel_forces` and the static shear patch functions (:func:`patch_static_force`,
+:func:`update_patch_displacement`) once per plant step for all wheels at once, so every
+per-step function takes arrays (one entry per wheel), uses closed forms or a fixed
+24-node Gauss-Legendre quadrature, and has no Python loop over wheels and no root
+finding.
 
 Frames and signs
 ----------------
@@ -82,24 +85,99 @@ Model (per wheel; theta measured from the downward vertical, positive forward)
   ``d(z) = 2 zeta sqrt(W'(z) W(z) / g) = 2 zeta (k_c + b k_phi) sqrt(2 r) (3 - n)/3
   sqrt((2n + 1)/(2 g)) z^n``: the damping that gives damping ratio ``zeta`` to a mass
   ``W(z)/g`` resting at ``z`` (Hunt-Crossley-like: it vanishes at ``z = 0``).
+
+Static shear patch (stiction)
+-----------------------------
+The forces above depend on slip ratio and slip angle, regularized by ``v_eps`` so that
+they can be applied explicitly; at rest they vanish, and a sustained load (gravity on a
+slope) makes a wheel creep viscously. Soil holds a resting wheel by static shear: the
+Janosi-Hanamoto stress depends on the shear *displacement*. So each wheel carries the
+shear displacement ``j = (j_x, j_y)`` (m, contact frame) of its contact patch relative
+to the soil, a first-order brush/LuGre-type state (one bristle for the whole patch):
+
+* Slip velocity of the rim point in contact relative to the ground
+  (:func:`patch_slip_velocity`): ``u = (v_x - r omega, v_y)``.
+* Evolution: ``dj/dt = u - (|r omega| / L) j`` with the relaxation length equal to the
+  patch length ``L = r (sin theta_1 + sin(rear_angle_ratio theta_1))``
+  (:func:`patch_length`): rim elements enter the patch unsheared, so rolling renews it
+  over one patch length of travel. Integrated exactly over each step with ``u``,
+  ``r omega`` and ``L`` held (:func:`update_patch_displacement`; unconditionally
+  stable): at rest ``j`` integrates the creep; a rolling wheel relaxes towards
+  ``u L / |r omega|`` (``s L`` in pure slip: the shear at the rear of the patch in
+  Wong's ``j = s x``). Elasto-plastic: ``j`` is projected back onto the ellipse
+  ``rho = sqrt((j_x/K)^2 + (j_y/K_y)^2) = n_sat`` (default 4, where 98 % of the strength
+  is mobilized), so beyond it the patch slides.
+* Static force (:func:`patch_static_force`), Janosi-Hanamoto in the displacement with
+  the Mohr-Coulomb strength of the patch (cohesion over the patch area ``b L``, friction
+  on the load; Wong's maximum thrust ``A c + W tan phi``)::
+
+      F_max = c b L + N tan phi,
+      F = -F_max (1 - exp(-rho)) (j_x/K, j_y/K_y) / rho - (c_x u_x, c_y u_y),
+      |F| <= F_max.
+
+  Along one axis this is ``-F_max (1 - exp(-|j|/K)) sign(j)``, i.e. Janosi-Hanamoto's
+  ``tau = tau_max (1 - exp(-|j|/K))`` over a uniformly displaced patch. Longitudinal and
+  lateral shear share one strength envelope here (unlike the Wong-Reece part).
+* Bristle damping (a numerical modelling choice, not a soil property):
+  ``c_x = 2 zeta_p sqrt(k_x m)`` with ``k_x = F_max / K`` (initial stiffness) and
+  ``m = N / g`` (the mass the wheel carries); ``c_y`` likewise with ``K_y``. Stability:
+  the force is applied explicitly over the plant step ``h``; for one wheel's share of
+  the rover (``a = h c / m``, ``b = h^2 k / m``) the step is linear in ``(j, v)``. If
+  ``j`` advances with the velocity at the start of the step (forward Euler, matrix
+  ``[[1, h], [-h k/m, 1 - a]]``) the eigenvalues lie inside the unit circle iff
+  ``b < a < 2 + b/2``, i.e. ``omega_p h / 2 < zeta_p < 1 / (omega_p h) + omega_p h / 4``;
+  if it advances with the velocity at the end of the step (semi-implicit Euler: what
+  happens in a Drake diagram, whose discrete plant steps in an unrestricted update that
+  precedes discrete updates) iff ``2 a + b < 4``, i.e.
+  ``zeta_p < 1 / (omega_p h) - omega_p h / 4``. Here
+  ``omega_p = sqrt(k/m) = sqrt(g (tan phi + c b L / N) / K) ~ sqrt(g tan phi / K)``,
+  about 8 rad/s on lunar soil for either rover: at ``h`` = 10 ms both hold for
+  ``0.04 < zeta_p < 12.5``, and the default ``zeta_p = 1`` (critical) sits far from
+  both ends. The damping also acts on the wheel spin, as ``c r^2`` on ``omega`` (76 N m
+  s/rad for the 300 kg rover), explicitly, against the drive servo's implicit ``kd``
+  (2000): stable while ``c r^2 < 2 I / h + kd``, satisfied by a wide margin.
+* Blend (:func:`static_weight`): tangential force and soil moment are
+  ``w F_static + (1 - w) F_Wong-Reece`` with ``w`` = 1 below a rolling speed ``|r omega|``
+  of 1 cm/s, 0 above 2 cm/s, a C1 smoothstep between; so at driving speeds the forces
+  are exactly the Wong-Reece ones. The patch force acts at the rim, so its moment about
+  the axle is its lever arm's. The weight uses the *rolling* speed, not the hub speed:
+  Wong-Reece is a rolling-wheel model, while a wheel that does not roll (parked,
+  braked, or locked and dragged) keeps shearing the same patch; a locked wheel sliding
+  at any speed gets the saturated patch force, Coulomb friction at its full strength.
+  (Weighted by ``max(|v_x|, |r omega|)`` instead, a braked 300 kg rover that passed
+  2 cm/s while loading up on a 30 deg slope kept sliding at 3 cm/s, since there the
+  ``v_eps``-regularized slip develops only part of the strength.)
+
+Approximations: one bristle per wheel (a brush model would resolve the shear along the
+patch); the static part ignores the normal-stress distribution (uniform mobilization);
+``j`` lives in the (steered) contact frame, so steering a parked wheel turns its shear
+with it; the strength uses the step's normal load. Sources: Janosi & Hanamoto (1961)
+and Wong (2008) for the shear law and strength; the bristle state with rolling
+relaxation follows the LuGre friction model (Canudas de Wit, Olsson, Astrom & Lischinsky
+1995, IEEE TAC 40(3)) and its distributed tyre version (Canudas de Wit, Tsiotras,
+Velenis, Basset & Gissinger 2003, Vehicle System Dynamics 39(3)); relaxation length as
+in tyre mechanics (Pacejka, *Tyre and Vehicle Dynamics*). Citations from memory.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations`: yaml_load_typed reads SoilParams' real field
+# types (the scenario's `soil` section).
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
 
-from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError
+from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
+from lunar_drake.moon import GRAVITY_MPS2
 
 __all__ = [
     "GRC1",
-    "LUNAR_GRAVITY_MPS2",
     "LUNAR_REGOLITH",
     "SOIL_PRESETS",
     "ImmobilizedError",
+    "ShearPatchParams",
     "SlipCurve",
     "SoilParams",
     "WheelForces",
@@ -111,6 +189,10 @@ __all__ = [
     "drawbar_pull",
     "entry_angle",
     "normal_force",
+    "patch_length",
+    "patch_slip_velocity",
+    "patch_static_force",
+    "patch_strength",
     "reference_slip",
     "shear_stress",
     "slip_angle",
@@ -119,12 +201,12 @@ __all__ = [
     "slip_vs_slope_curve",
     "soil_preset",
     "static_sinkage",
+    "static_weight",
     "travel_direction",
+    "update_patch_displacement",
     "wheel_forces",
 ]
 
-LUNAR_GRAVITY_MPS2 = 1.62
-"""Lunar surface gravity, m/s^2."""
 
 QUADRATURE_NODES_PER_SEGMENT = 12
 """Gauss-Legendre nodes on each of [theta_2, theta_m] and [theta_m, theta_1]."""
@@ -154,19 +236,13 @@ def _real(name: str, value) -> float:
 
 
 def _check(name: str, value, lo: float, hi: float, *, lo_open=False, hi_open=False, unit=""):
-    v = _real(name, value)
-    if (v <= lo if lo_open else v < lo) or (v >= hi if hi_open else v > hi):
-        lb = "(" if lo_open else "["
-        rb = ")" if hi_open else "]"
-        raise OutOfRangeError(
-            f"{name} = {value!r} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
-        )
+    check_range(name, _real(name, value), lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
 
 
 # ---------------------------------------------------------------------------- parameters
 
 
-@dataclass(frozen=True)
+@dataclass
 class SoilParams:
     """Bekker / Mohr-Coulomb / Janosi-Hanamoto / Wong-Reece soil parameters (SI units).
 
@@ -204,6 +280,11 @@ class SoilParams:
     damping_ratio: float = 0.5
 
     def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Checks every field; raises ConfigError / OutOfRangeError naming the field (also
+        for instances built without ``__post_init__``, e.g. by a YAML loader)."""
         if not isinstance(self.name, str) or not self.name.strip():
             raise ConfigError(f"name = {self.name!r} must be a non-empty string")
         _check("n", self.n, 0.0, 2.0, lo_open=True)
@@ -216,7 +297,7 @@ class SoilParams:
         _check("c2", self.c2, 0.0, 1.0)
         if self.c1 + self.c2 > 0.99:
             raise OutOfRangeError(
-                f"c1 + c2 = {self.c1!r} + {self.c2!r} must be <= 0.99 so that "
+                f"c1 = {self.c1:g} and c2 = {self.c2:g}: c1 + c2 must be <= 0.99 so that "
                 "theta_m = (c1 + c2 s) theta_1 stays inside the contact for s <= 1"
             )
         _check("rear_angle_ratio", self.rear_angle_ratio, 0.0, 1.0, hi_open=True)
@@ -301,9 +382,9 @@ def soil_preset(name: str) -> SoilParams:
     """The named soil preset (case-insensitive; ``-`` and ``_`` optional for ``grc1``)."""
     key = str(name).strip().lower()
     if key in SOIL_PRESETS:
-        return SOIL_PRESETS[key]
+        return dataclasses.replace(SOIL_PRESETS[key])  # a copy: configs are mutable
     if key.replace("-", "").replace("_", "") == "grc1":
-        return GRC1
+        return dataclasses.replace(GRC1)
     raise ConfigError(f"soil preset {name!r} is unknown; choose one of {sorted(SOIL_PRESETS)}")
 
 
@@ -353,7 +434,7 @@ def contact_stiffness(z, *, wheel: WheelParams, soil: SoilParams) -> np.ndarray:
 
 
 def contact_damping(
-    z, *, wheel: WheelParams, soil: SoilParams, gravity_mps2: float = LUNAR_GRAVITY_MPS2
+    z, *, wheel: WheelParams, soil: SoilParams, gravity_mps2: float = GRAVITY_MPS2
 ) -> np.ndarray:
     """Damping coefficient d(z) (N s/m) of the compliant contact; 0 for ``z <= 0``.
 
@@ -377,7 +458,7 @@ def normal_force(
     *,
     wheel: WheelParams,
     soil: SoilParams,
-    gravity_mps2: float = LUNAR_GRAVITY_MPS2,
+    gravity_mps2: float = GRAVITY_MPS2,
 ) -> np.ndarray:
     """Compliant contact normal force (N, along the terrain normal, >= 0).
 
@@ -634,6 +715,167 @@ def wheel_forces(
         lateral=Fy.reshape(shape),
         torque=T.reshape(shape),
     )
+
+
+# ------------------------------------------------------------ static shear patch (stiction)
+
+
+@dataclass(frozen=True)
+class ShearPatchParams:
+    """Numerical parameters of the static shear patch (module docstring, "Static shear
+    patch"). Modelling choices, not soil properties.
+
+    Attributes:
+        damping_ratio: bristle damping ratio ``zeta_p`` (-), in [0.05, 10]. The patch
+            force is applied explicitly: stable for roughly
+            ``omega_p h / 2 < zeta_p < 1 / (omega_p h)`` (``omega_p ~ sqrt(g tan(phi) /
+            K)``, about 8 rad/s on lunar soil, ``h`` the plant step; module docstring).
+            Default 1.
+        static_speed_mps: rolling (rim) speed ``|r omega|`` below which only the patch
+            acts (m/s), in (0, 1).
+        dynamic_speed_mps: rolling speed above which only the Wong-Reece forces act
+            (m/s), in (static_speed_mps, 1].
+        saturation_moduli: the patch displacement saturates (the patch slides) at
+            ``sqrt((j_x/K)^2 + (j_y/K_y)^2) = saturation_moduli`` (-), in [1, 20]; at 4,
+            98 % of the Mohr-Coulomb strength is mobilized.
+    """
+
+    damping_ratio: float = 1.0
+    static_speed_mps: float = 0.01
+    dynamic_speed_mps: float = 0.02
+    saturation_moduli: float = 4.0
+
+    def __post_init__(self) -> None:
+        _check("damping_ratio", self.damping_ratio, 0.05, 10.0)
+        _check("static_speed_mps", self.static_speed_mps, 0.0, 1.0, lo_open=True,
+               hi_open=True, unit=" m/s")  # fmt: skip
+        _check("dynamic_speed_mps", self.dynamic_speed_mps, self.static_speed_mps, 1.0,
+               lo_open=True, unit=" m/s (above static_speed_mps)")  # fmt: skip
+        _check("saturation_moduli", self.saturation_moduli, 1.0, 20.0)
+
+
+def patch_length(z, *, wheel: WheelParams, soil: SoilParams) -> np.ndarray:
+    """Contact patch length (m) along the rim's chord: ``L = r (sin theta_1 +
+    sin(rear_angle_ratio theta_1))``, with ``theta_1`` from :func:`entry_angle`
+    (``L ~ sqrt(2 r z)`` for a shallow rut); 0 for ``z <= 0``."""
+    r = wheel.radius_m
+    th1 = np.arccos(1.0 - np.minimum(np.maximum(z, 0.0), r) * (1.0 / r))
+    if soil.rear_angle_ratio == 0.0:
+        return r * np.sin(th1)
+    return r * (np.sin(th1) + np.sin(soil.rear_angle_ratio * th1))
+
+
+def patch_strength(N, length, *, wheel: WheelParams, soil: SoilParams) -> np.ndarray:
+    """Mohr-Coulomb shear strength of the contact patch (N): ``F_max = c b L + N tan phi``.
+
+    ``length`` is the patch length ``L`` (m, :func:`patch_length`; 0 out of contact):
+    cohesion acts over the patch area ``b L``. ``N`` (N), the normal load, is clipped at 0.
+    """
+    cohesion = (soil.c * wheel.width_m) * np.asarray(length, dtype=np.float64)
+    return cohesion + math.tan(soil.phi) * np.maximum(N, 0.0)
+
+
+def patch_slip_velocity(*, v_x, v_y, omega_r) -> np.ndarray:
+    """(n, 2) slip velocity (m/s) of the rim point in contact relative to the ground, in
+    the contact frame: ``(v_x - r omega, v_y)`` (hub velocity ``v``, rim speed ``r
+    omega``). Zero for a wheel rolling without slip."""
+    v_x = np.asarray(v_x, dtype=np.float64)
+    u = np.empty((*v_x.shape, 2))
+    u[..., 0] = v_x - omega_r
+    u[..., 1] = v_y
+    return u
+
+
+def update_patch_displacement(
+    j,
+    *,
+    slip_velocity,
+    rolling_speed,
+    length,
+    dt: float,
+    soil: SoilParams,
+    saturation_moduli: float = 4.0,
+) -> np.ndarray:
+    """Patch shear displacement (n, 2) (m) after a step ``dt`` (s); module docstring.
+
+    Exact solution of ``dj/dt = u - (|v_r| / L) j`` with the slip velocity ``u``
+    (:func:`patch_slip_velocity`), rolling speed ``v_r = r omega`` and patch length ``L``
+    held over the step: ``j' = j e^(-a dt) + u (1 - e^(-a dt)) / a``, ``a = |v_r| / L``
+    (``j + u dt`` at ``a = 0``): a wheel at rest integrates its creep, a rolling wheel
+    relaxes towards ``u L / |v_r|`` over one patch length of travel. Unconditionally
+    stable. Then elasto-plastic: scaled back onto the ellipse
+    ``sqrt((j_x/K)^2 + (j_y/K_y)^2) = saturation_moduli`` when outside it (the patch
+    slides). A wheel out of contact (``length <= 0``) gets ``j = 0`` (fresh soil).
+
+    Args:
+        j: (n, 2) displacement (x forward, y along the axle) at the start of the step.
+        slip_velocity: (n, 2) m/s. rolling_speed: (n,) m/s. length: (n,) m.
+    """
+    L = np.asarray(length, dtype=np.float64)
+    on = L > 0.0
+    x = np.abs(rolling_speed) * dt / np.maximum(L, 1e-300)  # a dt; huge (not inf) if L = 0
+    zero = x == 0.0
+    gain = (dt * (zero - np.expm1(-x))) / (x + zero)  # dt (1 - e^-x) / x, = dt at x = 0
+    jn = j * np.exp(-x)[:, None] + slip_velocity * gain[:, None]
+    rho = np.hypot(jn[:, 0] * (1.0 / soil.K), jn[:, 1] * (1.0 / soil.K_y))
+    scale = saturation_moduli / np.maximum(rho, saturation_moduli)
+    return jn * (scale * on)[:, None]
+
+
+def patch_static_force(
+    j,
+    *,
+    slip_velocity,
+    N,
+    length,
+    wheel: WheelParams,
+    soil: SoilParams,
+    damping_ratio: float = 1.0,
+    gravity_mps2: float = GRAVITY_MPS2,
+) -> np.ndarray:
+    """(n, 2) static patch force on the wheel (N; contact frame x, y); module docstring.
+
+    Janosi-Hanamoto in the patch displacement with a common Mohr-Coulomb envelope::
+
+        rho = sqrt((j_x/K)^2 + (j_y/K_y)^2),
+        F = -F_max (1 - exp(-rho)) (j_x/K, j_y/K_y) / rho - (c_x u_x, c_y u_y),
+
+    ``F_max`` = :func:`patch_strength` (``length`` the patch length, 0 out of contact);
+    then ``|F|`` is capped at ``F_max``. Along one axis this is exactly
+    ``-F_max (1 - exp(-|j|/K)) sign(j)``. The bristle damping
+    ``c_x = 2 zeta_p sqrt(k_x m)``, ``k_x = F_max / K`` (the patch's initial stiffness),
+    ``m = N / g`` (the mass the wheel carries), likewise ``c_y`` with ``K_y``: a
+    numerical damping (modelling choice), see :class:`ShearPatchParams`.
+    """
+    j = np.asarray(j, dtype=np.float64)
+    N = np.maximum(N, 0.0)
+    fmax = patch_strength(N, length, wheel=wheel, soil=soil)
+    e = j * np.array([1.0 / soil.K, 1.0 / soil.K_y])
+    rho = np.hypot(e[:, 0], e[:, 1])
+    # F_max (1 - e^-rho) / rho; its value at rho = 0 does not matter (e = 0 there).
+    mob = fmax * -np.expm1(-rho) / (rho + (rho == 0.0))
+    # (2 zeta)^2 k m K = 4 zeta^2 F_max N / g; c_x = sqrt(that / K), c_y = sqrt(that / K_y).
+    c = np.sqrt((4.0 * damping_ratio**2 / gravity_mps2) * fmax * N)
+    F = -(mob[:, None] * e) - (c[:, None] * np.array([soil.K**-0.5, soil.K_y**-0.5])) * (
+        slip_velocity
+    )
+    mag = np.hypot(F[:, 0], F[:, 1])
+    # Coulomb cap |F| <= F_max (exactly 1 when below it; 0 when F_max = 0 = |F|).
+    cap = fmax / np.maximum(np.maximum(mag, fmax), 1e-300)
+    return F * cap[:, None]
+
+
+def static_weight(rolling_speed, *, patch: ShearPatchParams) -> np.ndarray:
+    """Weight in [0, 1] of the static patch force against the Wong-Reece forces.
+
+    1 below ``patch.static_speed_mps``, 0 above ``patch.dynamic_speed_mps``, a C1
+    smoothstep ``1 - t^2 (3 - 2 t)`` in between (``t`` the fraction of the way); exactly
+    0 or 1 outside the band. ``rolling_speed`` = ``r omega`` (m/s; its sign is ignored).
+    """
+    v0 = patch.static_speed_mps
+    t = (np.abs(rolling_speed) - v0) * (1.0 / (patch.dynamic_speed_mps - v0))
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    return 1.0 - t * t * (3.0 - 2.0 * t)
 
 
 # ------------------------------------------------------------------- steady-state helpers

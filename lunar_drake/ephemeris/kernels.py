@@ -56,14 +56,14 @@ import importlib.metadata
 import json
 import os
 import threading
-import uuid
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lunar_drake.errors import LunarDrakeError
+from lunar_drake.errors import LunarDrakeError, OutputError
+from lunar_drake.files import ensure_output_dir, temp_sibling
 
 __all__ = [
     "BUILD_VERSION",
@@ -358,15 +358,19 @@ def build_kernels(directory: str | Path) -> dict[str, Path]:
     """Writes the four kernels and the manifest into ``directory``; returns name -> path.
 
     Each file is written under a unique temporary name and renamed into place; the
-    manifest is renamed last, so a crash never leaves a directory that verifies.
+    manifest is renamed last, so a crash never leaves a directory that verifies. On any
+    failure (Ctrl-C included) the temporary files are removed.
+
+    Raises:
+        OutputError: ``directory`` cannot be created or written.
+        KernelError: the kernels could not be written.
     """
     import spiceypy
 
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _ensure_cache_dir(directory)
     r = load_de421()
-    tag = f".tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp = {name: out / f".{name}{tag}" for name in KERNEL_FILES}
+    tmp = {name: temp_sibling(out / name) for name in KERNEL_FILES}
+    mtmp = temp_sibling(out / MANIFEST_FILE)
     try:
         tmp[LSK_FILE].write_text(_LSK_TEXT, encoding="ascii")
         tmp[FK_FILE].write_text(_FK_TEXT, encoding="ascii")
@@ -384,14 +388,13 @@ def build_kernels(directory: str | Path) -> dict[str, Path]:
         }
         for name, p in tmp.items():
             os.replace(p, out / name)
-        mtmp = out / f".{MANIFEST_FILE}{tag}"
         mtmp.write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n", encoding="ascii")
         os.replace(mtmp, out / MANIFEST_FILE)
-    except Exception as exc:
-        for p in tmp.values():
+    except BaseException as exc:
+        for p in (*tmp.values(), mtmp):
             with contextlib.suppress(OSError):
                 p.unlink()
-        if isinstance(exc, LunarDrakeError):
+        if isinstance(exc, LunarDrakeError) or not isinstance(exc, Exception):
             raise
         raise KernelError(f"could not build the SPICE kernels in {out}: {exc}") from exc
     return {name: out / name for name in KERNEL_FILES}
@@ -426,16 +429,42 @@ def spice_cache_dir() -> Path:
     return Path(user_cache_dir("lunar_drake")) / "spice"
 
 
+def _ensure_cache_dir(directory: str | Path) -> Path:
+    """Creates the kernel cache ``directory`` if needed and checks it is writable.
+
+    Raises:
+        OutputError: it cannot be; the message names it, the reason and the way out.
+    """
+    try:
+        return ensure_output_dir(directory, what="SPICE kernel cache directory")
+    except OutputError as exc:
+        raise OutputError(
+            f"{exc} (set LUNAR_DRAKE_CACHE to a writable directory; the kernels go in its "
+            "'spice' subdirectory)"
+        ) from None
+
+
 @contextlib.contextmanager
 def _dir_lock(directory: Path) -> Iterator[None]:
-    """An inter-process lock on ``directory`` (POSIX flock; a no-op elsewhere)."""
-    directory.mkdir(parents=True, exist_ok=True)
+    """An inter-process lock on ``directory`` (POSIX flock; a no-op elsewhere).
+
+    Raises:
+        OutputError: ``directory`` (or its lock file) cannot be created or written.
+    """
+    _ensure_cache_dir(directory)
     try:
         import fcntl
     except ImportError:  # pragma: no cover - Windows
         yield
         return
-    with open(directory / ".lock", "a+b") as f:
+    try:
+        f = open(directory / ".lock", "a+b")  # closed by the with-block below
+    except OSError as exc:
+        raise OutputError(
+            f"cannot write SPICE kernel cache directory '{directory}': "
+            f"{exc.strerror or exc} (set LUNAR_DRAKE_CACHE to a writable directory)"
+        ) from None
+    with f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:
             yield

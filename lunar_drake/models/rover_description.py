@@ -28,9 +28,15 @@ import numpy as np
 from pydrake.common.yaml import yaml_load_typed
 
 from lunar_drake.errors import ConfigError, OutOfRangeError, check_range
+from lunar_drake.moon import GRAVITY_MPS2
 
 STEERING_KINDS = ("skid", "explicit")
 """Allowed values of :attr:`RoverDescription.steering`."""
+
+
+BRAKE_SAFETY_FACTOR = 2.0
+"""Safety factor of the automatic parking-brake torque
+(:meth:`RoverDescription.brake_holding_torque_nm`)."""
 
 
 @dc.dataclass
@@ -82,6 +88,11 @@ class RoverDescription:
             (m in C, parallel lists; z_C = -chassis_height_m/2). Empty = a 3x3 grid at
             0 and +-0.45 of the chassis length and width.
         drive_effort_limit_nm: wheel drive torque limit (N·m).
+        max_rated_slope_deg: the steepest slope the rover is rated to park on (deg), in
+            (0, 60).
+        brake_torque_nm: holding torque of each wheel's parking brake (N·m), in
+            [0, 1e5]; 0 (the default) = automatic, see
+            :meth:`RoverDescription.brake_holding_torque_nm`.
         drive_kp, drive_kd: drive servo gains (N·m/rad, N·m·s/rad). kp = 0 makes the drive
             a pure velocity servo, tau = kd (v_d - v), clamped to the effort limit. The
             defaults are stiff (geared drives are nearly kinematic) and, with the plant's
@@ -130,6 +141,8 @@ class RoverDescription:
     belly_contact_x_m: list[float] = dc.field(default_factory=list)
     belly_contact_y_m: list[float] = dc.field(default_factory=list)
     drive_effort_limit_nm: float = 60.0
+    max_rated_slope_deg: float = 25.0
+    brake_torque_nm: float = 0.0
     drive_kp: float = 0.0
     drive_kd: float = 2000.0
     steer_effort_limit_nm: float = 40.0
@@ -230,6 +243,9 @@ class RoverDescription:
         _check("drive_effort_limit_nm", self.drive_effort_limit_nm, 0.0, 1.0e5, **nm)
         _check("steer_effort_limit_nm", self.steer_effort_limit_nm, 0.0, 1.0e5, **nm)
         _check("gimbal_effort_limit_nm", self.gimbal_effort_limit_nm, 0.0, 1.0e5, **nm)
+        _check("max_rated_slope_deg", self.max_rated_slope_deg, 0.0, 60.0, lo_open=True,
+               hi_open=True, unit=" deg")  # fmt: skip
+        _check("brake_torque_nm", self.brake_torque_nm, 0.0, 1.0e5, unit=" N·m (0 = automatic)")
         _check("drive_kp", self.drive_kp, 0.0, 1.0e7, unit=" N·m/rad")
         _check("drive_kd", self.drive_kd, 0.0, 1.0e7, lo_open=True, unit=" N·m·s/rad")
         _check("steer_kp", self.steer_kp, 0.0, 1.0e7, lo_open=True, unit=" N·m/rad")
@@ -251,6 +267,26 @@ class RoverDescription:
         if self.steering == "explicit":
             m += 4 * self.steering_module_mass_kg + 2 * self.rocker_mass_kg
         return m
+
+    def brake_holding_torque_nm(self, *, gravity_mps2: float = GRAVITY_MPS2) -> float:
+        """Holding torque of each wheel's parking brake (N·m).
+
+        ``brake_torque_nm`` if it is set (> 0); otherwise automatic: the torque that holds
+        the whole rover on a ``max_rated_slope_deg`` slope with all its weight on the
+        wheels, shared by the four wheels, times :data:`BRAKE_SAFETY_FACTOR`::
+
+            T = BRAKE_SAFETY_FACTOR * m g sin(max_rated_slope) * wheel_radius / 4
+
+        (``m`` = :meth:`total_mass_kg`, ``g`` lunar gravity by default). The factor 2
+        means any two wheels can hold the rover alone, which covers the uneven load split
+        on a slope (the downhill wheels carry more).
+        """
+        if self.brake_torque_nm > 0.0:
+            return float(self.brake_torque_nm)
+        downslope = (
+            self.total_mass_kg() * gravity_mps2 * math.sin(math.radians(self.max_rated_slope_deg))
+        )
+        return BRAKE_SAFETY_FACTOR * downslope * self.wheel_radius_m / 4.0
 
     def nominal_chassis_height_m(self) -> float:
         """Height of the chassis origin above level ground when the wheels just touch it
@@ -298,7 +334,9 @@ def husky_rp() -> RoverDescription:
     between the wheels and tops out at 0.38 m. Paper section 6 mounted the RP sensors on
     the Husky; mast, gimbal and panel masses and sizes here are assumptions, chosen so
     the cameras sit ~1.5 m above ground like on :func:`krex2_rp`. Drive torque limit
-    30 N·m is an assumption.
+    30 N·m is an assumption, and so is the 20 deg rated parking slope (an assumption
+    below the ~35 deg at which the lunar soil model lets a braked rover slide; note that
+    this rover cannot *climb* 20 deg in that soil, see docs/rover.md).
     """
     return RoverDescription(
         name="husky_rp",
@@ -327,6 +365,7 @@ def husky_rp() -> RoverDescription:
         solar_panel_mount_height_m=0.35,
         solar_panel_mass_kg=5.0,
         drive_effort_limit_nm=30.0,
+        max_rated_slope_deg=20.0,
         drive_kd=300.0,
         gimbal_effort_limit_nm=5.0,
         gimbal_kp=10.0,
@@ -347,8 +386,9 @@ def krex2_rp() -> RoverDescription:
     The split, steering offset (0.1 m), ground clearance (0.3 m), mast height (cameras at
     ~1.55 m above ground), 0.3 m stereo baseline, the vertical left-facing 1.0 x 0.7 m
     panel (placed behind the mast) and the servo gains are assumptions, not published RP
-    values. A vertical panel suits a polar site, where the Sun stays within a few degrees
-    of the horizon.
+    values. So is the 25 deg rated parking slope (the Apollo LRV's rated slope, from
+    memory, taken as a typical lunar-rover design figure). A vertical panel suits a polar
+    site, where the Sun stays within a few degrees of the horizon.
     """
     return RoverDescription()
 

@@ -65,9 +65,7 @@ from pydrake.multibody.tree import (
 
 from lunar_drake.errors import ConfigError, SimulationError
 from lunar_drake.models.rover_description import RoverDescription
-
-LUNAR_GRAVITY_MPS2 = 1.62
-"""Lunar surface gravity (m/s^2; NASA Moon fact sheet: 1.62)."""
+from lunar_drake.moon import GRAVITY_MPS2
 
 WHEELS = ("fl", "fr", "rl", "rr")
 """Wheel labels in the order used everywhere: front-left, front-right, rear-left,
@@ -444,7 +442,7 @@ def static_wheel_loads(
     rover: RoverModel,
     *,
     context=None,
-    gravity_mps2: float = LUNAR_GRAVITY_MPS2,
+    gravity_mps2: float = GRAVITY_MPS2,
 ) -> np.ndarray:
     """Vertical wheel loads (N, ordered fl, fr, rl, rr) with the chassis level and gravity
     along -z_C, from the finalized plant's CoM and wheel centres in ``context`` (default
@@ -470,6 +468,24 @@ def static_wheel_loads(
         ]
     weight = plant.CalcTotalMass(context, [rover.model_instance]) * gravity_mps2
     return _solve_wheel_loads(p_CWh, p_CCm, weight, pivots)
+
+
+def level_wheel_loads(description: RoverDescription) -> np.ndarray:
+    """Vertical wheel loads (N; fl, fr, rl, rr) on level ground in lunar gravity, from a
+    private, finalized copy of the rover model (:func:`static_wheel_loads`)."""
+    scratch = MultibodyPlant(0.0)
+    (instance,) = Parser(scratch).AddModelsFromString(rover_sdf(description), "sdf")
+    scratch.Finalize()
+    total_mass = sum(scratch.get_body(i).default_mass() for i in scratch.GetBodyIndices(instance))
+    rover = RoverModel(
+        description=description,
+        belly_points_C=np.zeros((0, 3)),
+        total_mass_kg=total_mass,
+        static_wheel_load_N=(),
+        nominal_chassis_height_m=0.0,
+        **_handles(scratch, instance, description),
+    )
+    return static_wheel_loads(scratch, rover)
 
 
 def _check_plant_supports(plant: MultibodyPlant, d: RoverDescription) -> None:
@@ -504,20 +520,7 @@ def add_rover(
     (instance,) = Parser(plant).AddModelsFromString(sdf, "sdf")
     handles = _handles(plant, instance, description)
     total_mass = sum(plant.get_body(i).default_mass() for i in plant.GetBodyIndices(instance))
-
-    scratch = MultibodyPlant(0.0)
-    (scratch_instance,) = Parser(scratch).AddModelsFromString(sdf, "sdf")
-    scratch.Finalize()
-    scratch_rover = RoverModel(
-        description=description,
-        belly_points_C=np.zeros((0, 3)),
-        total_mass_kg=total_mass,
-        static_wheel_load_N=(),
-        nominal_chassis_height_m=0.0,
-        **_handles(scratch, scratch_instance, description),
-    )
-    loads = static_wheel_loads(scratch, scratch_rover)
-
+    loads = level_wheel_loads(description)
     return RoverModel(
         description=description,
         belly_points_C=description.belly_contact_points_C(),

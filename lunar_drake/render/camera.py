@@ -1,8 +1,8 @@
 """The Hapke terrain camera core: ray-cast LOD terrain + rover geometry, deferred Hapke
 shading, and the sensor model (no Drake; the LeafSystem is systems/hapke_camera.py).
 
-Per frame: recentre the level-of-detail terrain on the camera when it has moved more
-than ``lod_recenter_m`` (cached tiles are reused), cast one ray per pixel (Open3D /
+Per frame (reference ``raycast`` engine): centre the level-of-detail terrain on the camera
+position rounded to ``lod_recenter_m`` (cached tiles are reused), cast one ray per pixel (Open3D /
 Embree), shade with the Hapke (2012, Sato et al. 2014 form) bidirectional reflectance
 blended with Lunar-Lambert near grazing emission, scaled per pixel by the albedo map,
 lit by the Sun (times the baked lightmap and a soft ray-cast rover shadow), an indirect
@@ -15,7 +15,7 @@ facing Earth is ``A_E (R_E / d)^2 k(phase)`` of the solar irradiance, with Earth
 Bond albedo A_E = 0.3 and k the illuminated fraction (a Lambert-sphere simplification).
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
 
 import dataclasses as dc
 import functools
@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError, check_range
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
@@ -47,62 +47,87 @@ EARTH_RADIUS_KM = 6371.0
 EARTH_BOND_ALBEDO = 0.3
 
 
-@dc.dataclass(frozen=True)
-class CameraModel:
-    """Pinhole camera and sensor settings.
+@dc.dataclass
+class CameraConfig:
+    """The mast stereo cameras: timing, optics, sensor settings and render engine (one
+    config for the scenario's ``sensors.camera`` section and the renderer).
 
     Attributes:
+        enabled: render the stereo pair (``lunar-drake run --no-cameras`` turns it off).
+        rate_hz: frame rate (Hz). delay_s: delivery delay of each frame (s).
         width, height: image size (px). fov_y_deg: vertical field of view (deg).
-        exposure_s, gain: default exposure time (s) and analog gain.
+        exposure_s, gain: exposure time (s) and analog gain.
         shadow_samples: rays toward the solar disk per penumbra pixel (soft rover shadow).
-        near_radius_m: full-resolution terrain radius around the camera (m).
-        tile_px: LOD tile size (px). lod_recenter_m: camera motion (m) that recentres it.
-        fill_fraction: indirect fill as a fraction of the direct sunlight (paper: ~3%).
-        fill_fraction_sun_down: fill fraction when the Sun is below the horizon (light
-            scattered from sunlit distant terrain; an assumption).
-        limb_blend_deg: emission angles (deg) over which Hapke blends into Lunar-Lambert.
-        normal_map_max_px: the smooth-shading normal map is built from the DEM decimated
-            to at most this many pixels a side (0: use the LOD triangles' flat normals;
-            the heightfield engine then uses 4096).
         engine: ``"heightfield"`` -- the fast engine (:mod:`lunar_drake.render.
             fast_engine`: DEM ray marching, tabulated BRDF, one compiled shading pass)
             -- or ``"raycast"`` -- the reference engine (Embree over LOD triangle tiles,
-            exact BRDF, numpy shading).
+            exact BRDF, numpy shading); docs/lighting.md compares them.
+        near_radius_m: full-resolution terrain radius around the camera (m; raycast).
+        tile_px: LOD tile size (px; raycast). lod_recenter_m: the LOD terrain is centred
+            on the camera position rounded to this grid (m; raycast), so it depends on
+            the camera pose only, never on the history of frames.
+        fill_fraction: indirect fill as a fraction of the direct sunlight (paper: ~3%).
+        fill_fraction_sun_down: fill fraction when the Sun is below the horizon (light
+            scattered from sunlit distant terrain; an assumption).
+        limb_blend_deg: [start, end] emission angles (deg) over which Hapke blends into
+            Lunar-Lambert.
+        normal_map_max_px: the smooth-shading normal map is built from the DEM decimated
+            to at most this many pixels a side (0: use the LOD triangles' flat normals;
+            the heightfield engine then uses 4096).
         dem_max_px: the heightfield engine's DEM is decimated to at most this many
             pixels a side.
     """
 
-    width: int = 1280
-    height: int = 960
+    enabled: bool = False
+    rate_hz: float = 0.2
+    delay_s: float = 0.0
+    width: int = 640
+    height: int = 480
     fov_y_deg: float = 45.0
     exposure_s: float = 0.002
     gain: float = 1.0
     shadow_samples: int = 8
+    engine: str = "heightfield"
     near_radius_m: float = 20.0
     tile_px: int = 256
     lod_recenter_m: float = 10.0
     fill_fraction: float = 0.03
     fill_fraction_sun_down: float = 0.003
-    limb_blend_deg: tuple[float, float] = (84.0, 89.0)
+    limb_blend_deg: list[float] = dc.field(default_factory=lambda: [84.0, 89.0])
     normal_map_max_px: int = 4096
-    engine: str = "heightfield"
     dem_max_px: int = 8192
 
     def __post_init__(self):
+        self.validate()
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
         if self.engine not in ENGINES:
-            raise ConfigError(f"engine = {self.engine!r}; allowed {', '.join(ENGINES)}")
-        if not 64 <= self.dem_max_px <= 65536:
-            raise OutOfRangeError(f"dem_max_px = {self.dem_max_px!r}; allowed 64..65536")
-        if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
+            raise ConfigError(f"engine = {self.engine!r} is unknown; allowed {', '.join(ENGINES)}")
+        check_range("rate_hz", self.rate_hz, 0.0, 100.0, lo_open=True, unit=" Hz")
+        check_range("delay_s", self.delay_s, 0.0, 3600.0, unit=" s")
+        check_range("width", self.width, 16, 8192, unit=" px")
+        check_range("height", self.height, 16, 8192, unit=" px")
+        check_range("fov_y_deg", self.fov_y_deg, 1.0, 170.0, unit=" deg")
+        check_range("exposure_s", self.exposure_s, 0.0, 10.0, lo_open=True, unit=" s")
+        check_range("gain", self.gain, 0.0, 64.0, lo_open=True)
+        check_range("shadow_samples", self.shadow_samples, 1, 64)
+        check_range("near_radius_m", self.near_radius_m, 1.0, 10000.0, unit=" m")
+        if self.tile_px < 4 or self.tile_px > 4096 or self.tile_px & (self.tile_px - 1):
             raise OutOfRangeError(
-                f"camera size {self.width}x{self.height} px; allowed 16..8192 each"
+                f"tile_px = {self.tile_px!r} is out of range; allowed powers of two in [4, 4096] px"
             )
-        if not 1.0 <= self.fov_y_deg <= 170.0:
-            raise OutOfRangeError(f"fov_y_deg = {self.fov_y_deg!r}; allowed [1, 170] deg")
-        if not self.exposure_s > 0:
-            raise OutOfRangeError(f"exposure_s = {self.exposure_s!r}; must be > 0 s")
-        if not self.gain > 0:
-            raise OutOfRangeError(f"gain = {self.gain!r}; must be > 0")
+        check_range("lod_recenter_m", self.lod_recenter_m, 0.0, 10000.0, lo_open=True, unit=" m")
+        check_range("fill_fraction", self.fill_fraction, 0.0, 1.0)
+        check_range("fill_fraction_sun_down", self.fill_fraction_sun_down, 0.0, 1.0)
+        lb = self.limb_blend_deg
+        if len(lb) != 2 or not 0.0 <= lb[0] < lb[1] <= 90.0:
+            raise OutOfRangeError(
+                f"limb_blend_deg = {list(lb)!r} is out of range; need [start, end] with "
+                "0 <= start < end <= 90 deg"
+            )
+        check_range("normal_map_max_px", self.normal_map_max_px, 0, 65536, unit=" px")
+        check_range("dem_max_px", self.dem_max_px, 64, 65536, unit=" px")
 
     def pinhole(self) -> PinholeCamera:
         return PinholeCamera.from_fov(
@@ -138,7 +163,8 @@ class TerrainCameraRenderer:
     Args:
         heightfield: the site terrain. albedo: normal-albedo grid covering the site (any
             resolution) or None (0.15 everywhere).
-        model: CameraModel. hapke: HapkeParams. sensor: SensorParams.
+        model: CameraConfig (optics, sensor settings, engine). hapke: HapkeParams.
+        sensor: SensorParams.
         dynamic_meshes: the rover's meshes (DynamicMesh, in their geometry frames).
     """
 
@@ -147,11 +173,13 @@ class TerrainCameraRenderer:
         *,
         heightfield,
         albedo=None,
-        model: CameraModel = CameraModel(),
+        model: CameraConfig | None = None,
         hapke: hapke_mod.HapkeParams = hapke_mod.HIGHLANDS_643NM,
         sensor: sensor_mod.SensorParams = sensor_mod.CMV4000_NAVCAM,
         dynamic_meshes=(),
     ):
+        model = CameraConfig() if model is None else model
+        model.validate()
         self.heightfield = heightfield
         self.model = model
         self.sensor = sensor
@@ -175,6 +203,7 @@ class TerrainCameraRenderer:
         self._camera = model.pinhole()
         self._raycaster = TerrainRaycaster()
         self._lod = None
+        self._lod_centre = None
         self._meshes = list(dynamic_meshes)
         if self._meshes:
             self._raycaster.set_dynamic_meshes(self._meshes, [np.eye(4)] * len(self._meshes))
@@ -208,9 +237,15 @@ class TerrainCameraRenderer:
         return self._fast
 
     def _ensure_lod(self, p_WC):
-        c = (float(p_WC[0]), float(p_WC[1]))
+        # The LOD centre is the camera position rounded to a lod_recenter_m grid: the
+        # terrain a frame sees depends on its pose only, never on earlier frames (the
+        # tiles are a cache, not state).
+        g = self.model.lod_recenter_m
         b = self.heightfield.bounds
-        c = (min(max(c[0], b.left), b.right), min(max(c[1], b.bottom), b.top))
+        c = (
+            min(max(round(float(p_WC[0]) / g) * g, b.left), b.right),
+            min(max(round(float(p_WC[1]) / g) * g, b.bottom), b.top),
+        )
         if self._lod is None:
             self._lod = TerrainLOD.build(
                 self.heightfield,
@@ -219,12 +254,10 @@ class TerrainCameraRenderer:
                 near_radius_m=self.model.near_radius_m,
             )
             self._raycaster.set_terrain(self._lod)
-            self._centre = c
-        elif math.hypot(c[0] - self._centre[0], c[1] - self._centre[1]) > self.model.lod_recenter_m:
-            if self._lod.changes_at(c):
-                self._lod.recenter(c)
-                self._raycaster.set_terrain(self._lod)
-            self._centre = c
+        elif c != self._lod_centre and self._lod.changes_at(c):
+            self._lod.recenter(c)
+            self._raycaster.set_terrain(self._lod)
+        self._lod_centre = c
 
     def illumination(
         self,
@@ -350,7 +383,7 @@ class TerrainCameraRenderer:
 
 
 __all__ = [
-    "CameraModel",
+    "CameraConfig",
     "DynamicMesh",
     "SpotLight",
     "TerrainCameraRenderer",

@@ -782,6 +782,7 @@ def run_cli(args) -> int:
     """
     import time
 
+    from lunar_drake.files import check_output_file
     from lunar_drake.terrain.geotiff import GeoTiffWriter, write_geotiff
     from lunar_drake.terrain.heightfield import Heightfield
 
@@ -790,6 +791,8 @@ def run_cli(args) -> int:
     if args.sun_az is None and args.utc is None:
         raise ConfigError("give --utc ISO (ephemeris) or --sun-az DEG --sun-el DEG")
     compress = None if str(args.compress).lower() == "none" else args.compress
+    # An unwritable --out fails now, in one line, not after the bake.
+    check_output_file(args.out, what="lightmap")
     t0 = time.perf_counter()
     with Heightfield.open(args.dem) as hf:
         if args.sun_az is not None:

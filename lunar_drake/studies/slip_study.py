@@ -29,14 +29,15 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.dynamics import terramechanics as tm
-from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError, SimulationError
+from lunar_drake.files import atomic_path, atomic_write_text, ensure_output_dir
+from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
 
 RAMP_START_M = 8.0
 """Distance (m) from the ramp's downslope edge to the spawn point."""
@@ -123,137 +124,100 @@ def reference_for(case: SlipCase, *, wheel_loads_N, wheel, soil) -> tuple[float,
         return 1.0, True
 
 
-def run_slip_case(case: SlipCase) -> dict:
-    """Simulates one case and returns its row (see :data:`CSV_COLUMNS`) and parameters."""
-    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+def case_scenario(case: SlipCase, *, ramp):
+    """The scenario of one case: the rover at the ramp's base heading upslope (seeded
+    lateral offset and heading error), a settling pause standing still (brakes on), then
+    the commanded speed, sent by the ground over a link without delay."""
+    from lunar_drake.scenario import RouteSegment, Scenario
 
-    from lunar_drake.diagrams.rover import add_rover_model, spawn_pose, wire_rover
-    from lunar_drake.models.rover_sdf import LUNAR_GRAVITY_MPS2
-    from lunar_drake.systems.energy_meter import EnergyMeter
-    from lunar_drake.systems.rover_kinematics import TwistSchedule
-    from lunar_drake.systems.terrain_source import TerrainSource
-
-    desc = _description(case.rover)
-    soil = tm.soil_preset(case.soil)
-    hf = ramp_heightfield(slope_deg=case.slope_deg, length_m=case.distance_m + 2.0)
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(
-        MultibodyPlantConfig(time_step=case.time_step_s, discrete_contact_approximation="sap"),
-        builder,
-    )
-    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -LUNAR_GRAVITY_MPS2])
-    rover = add_rover_model(plant, description=desc)
-    plant.Finalize()
-    terrain = builder.AddSystem(TerrainSource(heightfield=hf))
-    h = wire_rover(
-        builder,
-        plant=plant,
-        rover=rover,
-        heightfield_port=terrain.heightfield_output,
-        soil=soil,
-        seed=case.seed,
-    )
-    nominal_t = case.distance_m / case.speed_mps
-    t_end = case.settle_s + 3.0 * nominal_t + 10.0
-    route = builder.AddSystem(
-        TwistSchedule(segments=[(case.settle_s, 0.0, 0.0, 0.0), (t_end, case.speed_mps, 0.0, 0.0)])
-    )
-    builder.Connect(route.twist_output, h.kinematics.twist_input)
-    zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
-    builder.Connect(zero.get_output_port(), h.kinematics.gimbal_input)
-    meter = builder.AddSystem(
-        EnergyMeter(
-            actuation_indices=[
-                plant.get_joint_actuator(a.index()).input_start() for a in rover.drive_actuators
-            ],
-            velocity_indices=[
-                plant.num_positions() + j.velocity_start() for j in rover.drive_joints
-            ],
-            n_actuation=plant.num_actuators(),
-            n_state=plant.num_multibody_states(),
-            period_s=case.time_step_s,
-        )
-    )
-    builder.Connect(plant.get_net_actuation_output_port(), meter.actuation_input)
-    builder.Connect(plant.get_state_output_port(), meter.state_input)
-    period = 0.05
-    log_pose = LogVectorOutput(h.truth.pose_output, builder, period)
-    log_enc = LogVectorOutput(h.encoders.GetOutputPort("angles"), builder, period)
-    log_wheel = LogVectorOutput(h.contact.wheel_state_output, builder, period)
-    log_e = LogVectorOutput(meter.energy_output, builder, period)
-    diagram = builder.Build()
-    sim = Simulator(diagram)
-    ctx = sim.get_mutable_context()
-    # Seeded start: lateral offset and heading error (deterministic per seed).
     g = rng.generator(case.seed, "slip_study/spawn")
     y0 = float(g.uniform(-0.5, 0.5))
-    yaw0 = math.radians(float(g.normal(0.0, 0.5)))
-    x0 = hf.bounds.left + RAMP_START_M
-    X = spawn_pose(heightfield=hf, rover=rover, x_m=x0, y_m=y0, yaw_rad=yaw0, soil=soil)
-    plant.SetFloatingBaseBodyPoseInWorldFrame(
-        plant.GetMyMutableContextFromRoot(ctx), rover.chassis, X
-    )
-    start = np.array(X.translation())
-    sim.Initialize()
-    # Advance in chunks until the rover has climbed the distance (or time runs out).
-    t = 0.0
-    pose_port = h.truth.pose_output
-    fwd0 = X.rotation().matrix()[:, 0]
-    off_port = h.contact.off_terrain_output
-    stop = "distance reached"
-    while t < t_end:
-        t = min(t + 2.0, t_end)
-        try:
-            sim.AdvanceTo(t)
-        except RuntimeError as exc:  # a diverging case must not take the sweep down
-            stop = f"simulation failed at t = {sim.get_context().get_time():.2f} s: {exc}"
-            break
-        p = pose_port.Eval(h.truth.GetMyContextFromRoot(ctx))[:3]
-        if np.linalg.norm(p - start) >= case.distance_m:
-            break
-        if off_port.Eval(h.contact.GetMyContextFromRoot(ctx))[0] > 0.5:
-            stop = "left the ramp"
-            break
-        if np.dot(p - start, fwd0) < -SLIDE_BACK_STOP_M:
-            stop = "slid back (immobilized)"
-            break
-    else:
+    yaw0_deg = float(g.normal(0.0, 0.5))
+    nominal_t = case.distance_m / case.speed_mps
+    t_end = case.settle_s + 3.0 * nominal_t + 10.0
+    s = Scenario(name=f"slip {case.rover} {case.slope_deg:g} deg seed {case.seed}")
+    s.random_seed = case.seed
+    s.simulation_duration = t_end
+    s.soil = tm.soil_preset(case.soil)
+    s.rover.description = _description(case.rover)
+    s.rover.spawn_x_m = ramp.bounds.left + RAMP_START_M
+    s.rover.spawn_y_m = y0
+    s.rover.spawn_yaw_deg = yaw0_deg
+    s.ground.route = [
+        RouteSegment(duration_s=case.settle_s),
+        RouteSegment(duration_s=t_end, vx_mps=case.speed_mps),
+    ]
+    s.comms.uplink.delay_s = 0.0
+    s.comms.downlink.delay_s = 0.0
+    s.logging.period_s = 0.05
+    s.plant_config.time_step = case.time_step_s
+    return s
+
+
+def run_slip_case(case: SlipCase) -> dict:
+    """Simulates one case and returns its row (see :data:`CSV_COLUMNS`) and parameters."""
+    from lunar_drake.models.rover_sdf import level_wheel_loads
+    from lunar_drake.moon import GRAVITY_MPS2
+    from lunar_drake.rotations import rotation_matrix_from_rpy
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import SiteData
+
+    hf = ramp_heightfield(slope_deg=case.slope_deg, length_m=case.distance_m + 2.0)
+    scenario = case_scenario(case, ramp=hf)
+    start = {}
+
+    def stop_when(t, pose):
+        if not start:
+            start["p"] = np.array(pose[:3])
+            start["fwd"] = rotation_matrix_from_rpy(pose[3:6])[:, 0]
+        p = np.asarray(pose[:3])
+        if np.linalg.norm(p - start["p"]) >= case.distance_m:
+            return "distance reached"
+        if np.dot(p - start["p"], start["fwd"]) < -SLIDE_BACK_STOP_M:
+            return "slid back (immobilized)"
+        return None
+
+    try:
+        logs = simulate(
+            scenario=scenario, site=SiteData.from_heightfield(hf, name="ramp"), stop_when=stop_when
+        )
+        stop = logs.stop_reason
+    except SimulationError as exc:  # a diverging case must not take the sweep down
+        raise SimulationError(f"slip case {case}: {exc}") from exc
+    if stop.startswith("rover left the terrain"):
+        stop = "left the ramp"
+    elif stop == "duration reached":
         stop = "time limit"
-    nf = 6
-    times = log_pose.FindLog(ctx).sample_times()
-    pose = log_pose.FindLog(ctx).data()
-    enc = log_enc.FindLog(ctx).data()
-    ws = log_wheel.FindLog(ctx).data()
-    energy = log_e.FindLog(ctx).data()[0]
-    travelled = np.linalg.norm(pose[:3] - start[:, None], axis=0)
+    nf = len(WHEEL_STATE_FIELDS)
+    pose_log = logs.vectors["truth.pose"]
+    times = pose_log.times
+    pose = pose_log.data
+    enc = logs.vectors["rover.wheel_encoders"].data
+    ws = logs.vectors["truth.wheel_state"].data
+    energy = logs.vectors["truth.drive_energy"].data[:, 0]
+    start_p = pose[0, :3]
+    travelled = np.linalg.norm(pose[:, :3] - start_p, axis=1)
     driving = times >= case.settle_s
-    i0 = (
-        int(np.argmax(driving & (travelled >= 0.1 * case.distance_m)))
-        if (driving & (travelled >= 0.1 * case.distance_m)).any()
-        else int(np.argmax(driving))
-    )
+    far = driving & (travelled >= 0.1 * case.distance_m)
+    i0 = int(np.argmax(far)) if far.any() else int(np.argmax(driving))
     i1 = len(times) - 1
     # Signed progress along the rover's heading at i0 (a rover sliding back counts < 0).
-    from pydrake.math import RollPitchYaw
-
-    fwd = RollPitchYaw(pose[3:6, i0]).ToRotationMatrix().matrix()[:, 0]
-    gt = float(np.dot(pose[:3, i1] - pose[:3, i0], fwd))
-    dr = float(np.mean(enc[:, i1] - enc[:, i0]) * desc.wheel_radius_m)
+    gt = float(np.dot(pose[i1, :3] - pose[i0, :3], rotation_matrix_from_rpy(pose[i0, 3:6])[:, 0]))
+    desc = scenario.rover.description
+    dr = float(np.mean(enc[i1] - enc[i0]) * desc.wheel_radius_m)
     slip = 1.0 - gt / dr if dr > 1e-9 else float("nan")
     wheel = tm.WheelParams(radius_m=desc.wheel_radius_m, width_m=desc.wheel_width_m)
-    level_loads = np.asarray(rover.static_wheel_load_N, dtype=float)
-    # Static normal loads on the slope: the rover at rest, braked by its wheel servos,
-    # over the last 0.5 s of the settling pause (the same force balance as a steady
-    # climb: the braking force equals the traction; load transfer included).
+    soil = scenario.soil
+    # Static normal loads on the slope: the rover at rest, braked, over the last 0.5 s of
+    # the settling pause (the same force balance as a steady climb: the braking force
+    # equals the traction; load transfer included).
     rest = (times > case.settle_s - 0.5) & (times <= case.settle_s)
-    slope_loads = ws[1::nf][:, rest].mean(axis=1)
+    slope_loads = ws[rest][:, WHEEL_STATE_FIELDS.index("normal_force_N") :: nf].mean(axis=0)
     cos_t = math.cos(math.radians(case.slope_deg))
     ref, immobilized = reference_for(
         case, wheel_loads_N=slope_loads / cos_t, wheel=wheel, soil=soil
     )
+    level_loads = level_wheel_loads(desc)
     row = {
         "rover": case.rover,
         "slope_deg": case.slope_deg,
@@ -261,7 +225,7 @@ def run_slip_case(case: SlipCase) -> dict:
         "slip": slip,
         "reference_slip": ref,
         "immobilized": immobilized,
-        "sinkage_m": float(np.mean(ws[0::nf, i0 : i1 + 1])),
+        "sinkage_m": float(np.mean(ws[i0 : i1 + 1, WHEEL_STATE_FIELDS.index("sinkage_m") :: nf])),
         "energy_J": float(energy[i1] - energy[i0]),
         "distance_m": float(travelled[i1]),
         "time_s": float(times[i1]),
@@ -275,7 +239,7 @@ def run_slip_case(case: SlipCase) -> dict:
         "wheel_width_m": desc.wheel_width_m,
         "static_wheel_load_level_N": [float(v) for v in level_loads],
         "wheels": ["fl", "fr", "rl", "rr"],
-        "gravity_mps2": LUNAR_GRAVITY_MPS2,
+        "gravity_mps2": GRAVITY_MPS2,
         "speed_mps": case.speed_mps,
         "time_step_s": case.time_step_s,
     }
@@ -334,8 +298,7 @@ def run_slip_study(
         for s in slopes_deg
         for k in range(seeds)
     ]
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = ensure_output_dir(out_dir, what="--out directory")
     if workers > 1:
         import dask
 
@@ -358,21 +321,18 @@ def run_slip_study(
     for r in results:
         params.setdefault(r["params"]["rover"], r["params"])
     _write_csv(out_dir / "slip.csv", rows)
-    tmp = out_dir / f".params.json.tmp-{os.getpid()}"
     doc = {
         "rovers": params,
         "slope_loads": [r["slope_loads"] for r in results],
         "method": __doc__.strip(),
     }
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    os.replace(tmp, out_dir / "params.json")
+    atomic_write_text(out_dir / "params.json", json.dumps(doc, indent=2) + "\n")
     plot_slip(rows, path=out_dir / "slip.png")
     return rows
 
 
 def _write_csv(path: Path, rows) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "w") as f:
+    with atomic_path(path, what="slip table") as tmp, open(tmp, "w") as f:
         f.write(",".join(CSV_COLUMNS) + "\n")
         for r in rows:
             vals = []
@@ -386,7 +346,6 @@ def _write_csv(path: Path, rows) -> None:
                     else str(v)
                 )
             f.write(",".join(vals) + "\n")
-    os.replace(tmp, path)
 
 
 def summarize(rows) -> list[dict]:
@@ -413,14 +372,12 @@ def summarize(rows) -> list[dict]:
 
 def plot_slip(rows, *, path) -> Path:
     """slip.png: mean and spread of slip versus slope per rover, with the reference."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     path = Path(path)
     summ = summarize(rows)
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig = Figure(figsize=(7, 4.5))
+    ax = fig.subplots()
     for k, rover in enumerate(sorted({r["rover"] for r in summ})):
         ss = [r for r in summ if r["rover"] == rover]
         x = np.array([r["slope_deg"] for r in ss])
@@ -456,8 +413,6 @@ def plot_slip(rows, *, path) -> Path:
     ax.legend(fontsize=8)
     ax.set_title("Wheel slip vs slope (planar ramps)")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
+    with atomic_path(path, what="plot") as tmp:
+        fig.savefig(tmp, dpi=110)
     return path

@@ -17,6 +17,7 @@ from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.camera import AU_KM, TerrainCameraRenderer
 from lunar_drake.render.raycast import DynamicMesh
 from lunar_drake.render.shapes import shape_mesh
+from lunar_drake.sensors.sampling import delivered_index, samples_in_flight
 
 
 @dc.dataclass(frozen=True)
@@ -29,10 +30,11 @@ class CameraMount:
     X_BC: RigidTransform
 
 
-@dc.dataclass
+@dc.dataclass(frozen=True, eq=False)
 class Frame:
-    """One camera's latest frame: raw uint16 (12-bit codes), 8-bit preview, depth (m),
-    label (0 sky, 1 terrain, 2 rover), I/F radiance, capture time and index."""
+    """One camera's frame: raw uint16 (12-bit codes), 8-bit preview, depth (m), label
+    (0 sky, 1 terrain, 2 rover), I/F radiance, capture time and index. Immutable (kept in
+    abstract state without copies)."""
 
     raw: np.ndarray
     preview: np.ndarray
@@ -41,6 +43,9 @@ class Frame:
     radiance: np.ndarray
     time_s: float
     index: int
+
+    def __deepcopy__(self, memo):
+        return self
 
 
 def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exclude_bodies=()):
@@ -64,8 +69,11 @@ def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exc
 
 
 class HapkeCamera(LeafSystem):
-    """Renders every mounted camera at ``rate_hz`` (periodic unrestricted update) and
-    holds the frames in its state, so outputs are cheap and deterministic.
+    """Renders every mounted camera at ``rate_hz`` (periodic unrestricted update from
+    t = 0) and holds the frames in its state, so outputs are cheap and deterministic.
+    Frame k (taken at t_k = k / rate_hz) is delivered at t_k + ``delay_s``: the outputs
+    show the latest delivered frame (blank, index -1, before the first), as every
+    sensor does (:class:`~lunar_drake.systems.sampled_sensor.SampledSensor`).
 
     .. pydrake_system::
 
@@ -87,7 +95,7 @@ class HapkeCamera(LeafSystem):
         - <name>.depth
         - <name>.label
 
-    ``exposure`` is (exposure_s, gain); unconnected, the CameraModel defaults are used.
+    ``exposure`` is (exposure_s, gain); unconnected, the CameraConfig defaults are used.
     Exposure <= 0 or gain <= 0 raises OutOfRangeError. ``lightmap`` / ``track_depth``
     are abstract callables ``(x, y) -> value`` in site coordinates (lit fraction, groove
     depth in m). Sensor noise is keyed by (seed, system name, camera, frame index).
@@ -110,6 +118,7 @@ class HapkeCamera(LeafSystem):
         mounts,
         rover_geometry=(),
         rate_hz: float = 1.0,
+        delay_s: float = 0.0,
         seed: int = 0,
         name: str = "camera",
         lights=(),
@@ -117,6 +126,10 @@ class HapkeCamera(LeafSystem):
         super().__init__()
         if not 0 < rate_hz <= 100:
             raise OutOfRangeError(f"rate_hz = {rate_hz!r}; allowed (0, 100] Hz")
+        if not 0 <= delay_s <= 3600:
+            raise OutOfRangeError(f"delay_s = {delay_s!r}; allowed [0, 3600] s")
+        self._delay = float(delay_s)
+        self._depth = samples_in_flight(rate_hz=rate_hz, delay_s=delay_s)
         self._r = renderer
         self._mounts = list(mounts)
         self._gids = [g for g, _ in rover_geometry]
@@ -143,7 +156,12 @@ class HapkeCamera(LeafSystem):
             "track_depth", AbstractValue.Make(object())
         )
         blank = {mt.name: _blank(m.width, m.height) for mt in self._mounts}
-        self._state = self.DeclareAbstractState(AbstractValue.Make(blank))
+        # State: the frames in flight, newest first (one set per sample).
+        self._state = self.DeclareAbstractState(AbstractValue.Make((blank,) * self._depth))
+        self._blank = blank
+        prereq = {self.all_state_ticket()}
+        if self._depth > 1:
+            prereq.add(self.time_ticket())
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / self._rate, 0.0, self._update)
         self.ports = {}
         for mt in self._mounts:
@@ -152,35 +170,43 @@ class HapkeCamera(LeafSystem):
                 f"{n}.raw",
                 lambda: AbstractValue.Make(np.zeros((1, 1), np.uint16)),
                 lambda c, o, n=n: o.set_value(self._frames(c)[n].raw),
-                prerequisites_of_calc={self.all_state_ticket()},
+                prerequisites_of_calc=prereq,
             )
             self.ports[f"{n}.preview"] = self.DeclareAbstractOutputPort(
                 f"{n}.preview",
                 lambda: AbstractValue.Make(ImageGrey8U(m.width, m.height)),
                 lambda c, o, n=n: self._to_image(o, ImageGrey8U, self._frames(c)[n].preview),
-                prerequisites_of_calc={self.all_state_ticket()},
+                prerequisites_of_calc=prereq,
             )
             self.ports[f"{n}.depth"] = self.DeclareAbstractOutputPort(
                 f"{n}.depth",
                 lambda: AbstractValue.Make(ImageDepth32F(m.width, m.height)),
                 lambda c, o, n=n: self._to_image(o, ImageDepth32F, self._frames(c)[n].depth),
-                prerequisites_of_calc={self.all_state_ticket()},
+                prerequisites_of_calc=prereq,
             )
             self.ports[f"{n}.label"] = self.DeclareAbstractOutputPort(
                 f"{n}.label",
                 lambda: AbstractValue.Make(ImageLabel16I(m.width, m.height)),
                 lambda c, o, n=n: self._to_image(o, ImageLabel16I, self._frames(c)[n].label),
-                prerequisites_of_calc={self.all_state_ticket()},
+                prerequisites_of_calc=prereq,
             )
         self.frame_index_output = self.DeclareVectorOutputPort(
             "frame_index",
             BasicVector(1),
             lambda c, o: o.SetFromVector([next(iter(self._frames(c).values())).index]),
-            prerequisites_of_calc={self.all_state_ticket()},
+            prerequisites_of_calc=prereq,
         )
 
     def _frames(self, context) -> dict:
-        return context.get_abstract_state(0).get_value()
+        """The frames delivered by the context's time (camera name -> Frame)."""
+        ring = context.get_abstract_state(self._state).get_value()
+        if self._depth == 1:
+            return ring[0]
+        k = delivered_index(context.get_time(), rate_hz=self._rate, delay_s=self._delay)
+        if k < 0:
+            return self._blank
+        newest = next(iter(ring[0].values())).index
+        return ring[min(max(newest - k, 0), self._depth - 1)]
 
     @staticmethod
     def _to_image(output, cls, array):
@@ -271,7 +297,8 @@ class HapkeCamera(LeafSystem):
                 time_s=t,
                 index=index,
             )
-        state.get_mutable_abstract_state(0).set_value(frames)
+        ring = context.get_abstract_state(self._state).get_value()
+        state.get_mutable_abstract_state(self._state).set_value((frames, *ring[:-1]))
 
     @staticmethod
     def _track_sampler(tracks, p, half_m: float = 25.0):

@@ -112,7 +112,9 @@ class LightmapSource(LeafSystem):
             from lunar_drake.errors import OutOfRangeError
 
             raise OutOfRangeError(
-                f"t = {t!r} s is outside the baked lightmaps' times [{ts[0]:g}, {ts[-1]:g}] s"
+                f"t = {t:g} s is outside the baked lightmaps' times [{ts[0]:g}, {ts[-1]:g}] s; "
+                "they cover the scenario's simulation_duration (simulate no further, or "
+                "set it longer)"
             )
         k = min(int(np.searchsorted(ts, t, side="right")) - 1, len(ts) - 2)
         f = (t - ts[k]) / (ts[k + 1] - ts[k])

@@ -1,24 +1,18 @@
-"""WheelEncoders: quantized wheel angles sampled periodically (wheel odometry input)."""
+"""WheelEncoders: quantized wheel angles (wheel odometry input)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import MatrixGain
 
-from lunar_drake.dynamics.sensor_models import (
-    WheelEncoderConfig,
-    encoder_angles,
-    encoder_counts,
-    sample_index,
-)
 from lunar_drake.errors import ConfigError
-from lunar_drake.rng import stream_key
+from lunar_drake.sensors.wheel_encoders import WheelEncoderConfig, encoder_angles
+from lunar_drake.systems.sampled_sensor import SampledSensor
 
 
-class WheelEncoders(LeafSystem):
+class WheelEncoders(SampledSensor):
     """Incremental encoders on n wheel joints (paper section 7, wheel odometry).
 
     .. pydrake_system::
@@ -27,21 +21,18 @@ class WheelEncoders(LeafSystem):
         input_ports:
         - wheel_angles
         output_ports:
-        - counts
         - angles
 
-    ``wheel_angles`` (n,) are the wheel joint angles (rad), e.g. from the plant state
-    through :func:`wheel_angle_selector`. ``counts`` (n,) are the integer counts (as
-    floats) of the last sample, nearest count to the angle (plus optional angle noise
-    before quantization); ``angles`` (n,) are those counts converted back to rad.
-    ``counts`` is discrete state, updated every ``1 / config.sample_rate_hz`` s from
-    t = 0 (zero before the first sample), no feedthrough.
+    ``wheel_angles`` (n,) are the true wheel joint angles (rad), e.g. from the plant
+    state through :func:`wheel_angle_selector`. ``angles`` (n,) are the measured angles
+    (rad): whole encoder counts times the count angle (plus optional angle noise before
+    quantization); sampled and delivered as :class:`SampledSensor` describes (zero
+    before the first delivery).
 
     Args:
-        n_wheels: number of wheels n.
-        seed: scenario random seed (only used when ``config.angle_noise_sigma_rad > 0``).
+        n_wheels: number of wheels n. seed: scenario random seed.
         name: system name and noise-stream name.
-        config: :class:`WheelEncoderConfig`.
+        config: :class:`~lunar_drake.sensors.wheel_encoders.WheelEncoderConfig`.
     """
 
     def __init__(
@@ -52,48 +43,35 @@ class WheelEncoders(LeafSystem):
         name: str = "wheel_encoders",
         config: WheelEncoderConfig | None = None,
     ):
-        super().__init__()
         if int(n_wheels) != n_wheels or n_wheels < 1:
             raise ConfigError(f"n_wheels = {n_wheels!r}; must be an integer >= 1")
-        self.set_name(name)
-        self._n = int(n_wheels)
         self._config = WheelEncoderConfig() if config is None else config
-        self._key = stream_key(seed, name)
+        super().__init__(
+            name=name,
+            seed=seed,
+            rate_hz=self._config.rate_hz,
+            delay_s=self._config.delay_s,
+            initial=np.zeros(int(n_wheels)),
+            output_name="angles",
+        )
+        self._n = int(n_wheels)
         self.wheel_angles_input = self.DeclareVectorInputPort("wheel_angles", self._n)
-        self._counts_index = self.DeclareDiscreteState(self._n)
-        self.DeclarePeriodicDiscreteUpdateEvent(
-            1.0 / self._config.sample_rate_hz, 0.0, self._update
-        )
-        self.counts_output = self.DeclareStateOutputPort("counts", self._counts_index)
-        self.angles_output = self.DeclareVectorOutputPort(
-            "angles",
-            self._n,
-            self._calc_angles,
-            prerequisites_of_calc={self.discrete_state_ticket(self._counts_index)},
-        )
 
     @property
     def config(self) -> WheelEncoderConfig:
-        """The encoder model."""
+        """Rate, delay, resolution and noise."""
         return self._config
 
-    def _update(self, context, discrete_state):
+    def sample(self, context, generator, discrete_state):
         angles = self.wheel_angles_input.Eval(context)
-        k = sample_index(context.get_time(), self._config.sample_rate_hz)
-        counts = encoder_counts(angles, config=self._config, key=self._key, step=k)
-        discrete_state.set_value(self._counts_index, counts)
-
-    def _calc_angles(self, context, output):
-        counts = context.get_discrete_state(self._counts_index).get_value()
-        output.SetFromVector(encoder_angles(counts, config=self._config))
+        return encoder_angles(angles, config=self._config, generator=generator)
 
 
 def wheel_angle_selector(plant, joints: Sequence) -> MatrixGain:
     """A MatrixGain mapping the plant state [q; v] to the angles (rad) of ``joints``.
 
     ``joints`` are single-dof (revolute) Joint objects of the finalized ``plant``, in the
-    order of the encoders. Connect ``plant.get_state_output_port()`` (or a model
-    instance's state port together with that instance's joints' offsets) to its input.
+    order of the encoders; connect ``plant.get_state_output_port()`` to its input.
     """
     nx = plant.num_positions() + plant.num_velocities()
     d = np.zeros((len(joints), nx))

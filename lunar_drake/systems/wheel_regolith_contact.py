@@ -3,13 +3,21 @@ decision 2), applied through the plant's applied-spatial-force input."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.multibody.math import SpatialForce, SpatialVelocity
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import BasicVector, LeafSystem, ValueProducer
+from pydrake.systems.framework import (
+    AbstractParameterIndex,
+    BasicVector,
+    DiscreteStateIndex,
+    LeafSystem,
+    ValueProducer,
+)
 
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import (
@@ -31,11 +39,43 @@ WHEEL_STATE_FIELDS = (
 )
 
 
+class _Kinematics(NamedTuple):
+    """Stage 1 of a contact evaluation: everything that does not depend on the patch state
+    (footprint geometry, loads, slip, the Wong-Reece forces, belly contact)."""
+
+    p: np.ndarray  # (n, 3) wheel centres, world
+    axle: np.ndarray  # (n, 3) axle directions, world
+    n_W: np.ndarray  # (n, 3) contact normals
+    forward_W: np.ndarray  # (n, 3) contact-frame x
+    lateral_W: np.ndarray  # (n, 3) contact-frame y
+    r_c: np.ndarray  # (n, 3) contact point relative to the wheel centre
+    on: np.ndarray  # (n,) wheel on the raster
+    state: np.ndarray  # (n, len(WHEEL_STATE_FIELDS)) wheel_state rows (drawbar pull: 0)
+    N: np.ndarray  # (n,) normal force (N)
+    slip_velocity: np.ndarray  # (n, 2) patch slip velocity, contact frame (m/s)
+    rolling_speed: np.ndarray  # (n,) r omega (m/s)
+    patch_length: np.ndarray  # (n,) m; 0 out of contact
+    static_weight: np.ndarray  # (n,) weight of the patch force
+    dynamic: tuple  # Wong-Reece (drawbar pull, lateral, soil moment about +axle), (n,) each
+    belly: tuple | None  # (force, moment about the chassis origin), world
+    off: bool  # any wheel or belly point off the raster
+
+
+class _Contact(NamedTuple):
+    """Stage 2: the forces with the patch state (the outputs' cache entry's value)."""
+
+    F: np.ndarray  # (n, 3) force on each wheel, world
+    tau: np.ndarray  # (n, 3) moment about each wheel centre, world
+    state: np.ndarray  # (n, len(WHEEL_STATE_FIELDS)) wheel_state rows
+    belly: tuple | None
+    off: bool
+
+
 class WheelRegolithContact(LeafSystem):
     """Per-wheel soil contact from the Heightfield: Bekker sinkage and normal force,
     Wong-Reece/Janosi-Hanamoto traction versus slip, lateral force versus slip angle,
-    compaction resistance; plus stiff penalty contact at chassis belly points (rock and
-    belly strikes, from the same raster).
+    compaction resistance, a static shear patch that holds a wheel at rest; plus stiff
+    penalty contact at chassis belly points (rock and belly strikes, from the same raster).
 
     .. pydrake_system::
 
@@ -56,13 +96,40 @@ class WheelRegolithContact(LeafSystem):
     leaves the raster (or touches nodata) get no force and raise ``off_terrain`` (1.0),
     which a simulator monitor turns into a clean stop.
 
+    Static shear patch (module docstring of :mod:`lunar_drake.dynamics.terramechanics`):
+    each wheel's patch shear displacement ``j = (j_x, j_y)`` (m, contact frame) is
+    discrete state, ``2 n`` values ordered ``[j_x0, j_y0, j_x1, ...]``, advanced every
+    ``time_step_s`` (the plant's time step) by a periodic discrete update,
+    :func:`~lunar_drake.dynamics.terramechanics.update_patch_displacement`. Below a
+    rolling speed ``|r omega|`` of ``patch.static_speed_mps`` the tangential force is the
+    patch's static (Mohr-Coulomb / Janosi-Hanamoto) force, above
+    ``patch.dynamic_speed_mps`` the Wong-Reece forces, blended smoothly in between; the
+    ``drawbar_pull_N`` column is the blended net force along the wheel heading.
+
+    The evaluation is cached in two stages so that the footprint geometry and the
+    Wong-Reece forces are computed once per step: the kinematics (everything but the
+    patch force; from the inputs and the soil), read by the patch update, and the forces
+    (kinematics plus patch state), read by the outputs. Drake's discrete MultibodyPlant
+    (with sampled output ports, the default) steps in an unrestricted update, which the
+    Simulator applies before discrete updates; so the patch update sees the plant's new
+    state (a semi-implicit step of ``j``) and evaluates the kinematics that the next
+    step's forces reuse, and only the cheap second stage is redone for the new ``j``.
+
+    The soil is an abstract *parameter* (default: the ``soil`` argument), so a Context
+    may carry another soil without rebuilding the diagram (:meth:`get_soil`,
+    :meth:`set_soil`).
+
     Args:
         wheel_bodies: BodyIndex of each wheel (axle = body +y, origin at the centre).
-        wheel: wheel radius and width. soil: soil parameters.
+        wheel: wheel radius and width. soil: default soil parameters.
         belly_body: BodyIndex of the chassis; belly_points_B: (k, 3) points in it (m).
         belly_stiffness_N_per_m, belly_damping_Ns_per_m, belly_friction: penalty law
             per belly point.
         sampling: footprint sampling. v_eps: slip regularization speed (m/s).
+        direction_eps: speed (m/s) over which the compaction resistance fades in.
+        time_step_s: period of the patch update (s); the plant's time step.
+        patch: static shear patch parameters (default :class:`ShearPatchParams()
+            <lunar_drake.dynamics.terramechanics.ShearPatchParams>`).
     """
 
     def __init__(
@@ -79,13 +146,16 @@ class WheelRegolithContact(LeafSystem):
         sampling: FootprintSampling | None = None,
         v_eps: float = 0.08,
         direction_eps: float = 0.02,
+        time_step_s: float = 0.01,
+        patch: tm.ShearPatchParams | None = None,
     ):
         super().__init__()
         self._wheels = [int(b) for b in wheel_bodies]
         if not self._wheels:
             raise ValueError("wheel_bodies must be a non-empty list of BodyIndex")
+        if not isinstance(soil, tm.SoilParams):
+            raise TypeError(f"soil must be a SoilParams, got {type(soil).__name__}")
         self._wheel = wheel
-        self._soil = soil
         self._belly = None if belly_body is None else int(belly_body)
         self._belly_pts = (
             np.zeros((0, 3)) if belly_points_B is None else np.asarray(belly_points_B, float)
@@ -96,9 +166,21 @@ class WheelRegolithContact(LeafSystem):
         self._sampling = sampling or FootprintSampling()
         self._v_eps = float(v_eps)
         self._dir_eps = float(direction_eps)
+        self._dt = float(time_step_s)
+        if not (np.isfinite(self._dt) and self._dt > 0.0):
+            raise ValueError(f"time_step_s = {time_step_s!r} must be a positive number")
+        self._patch = tm.ShearPatchParams() if patch is None else patch
+        if not isinstance(self._patch, tm.ShearPatchParams):
+            raise TypeError(f"patch must be a ShearPatchParams, got {type(patch).__name__}")
         self._wheel_index_objs = [BodyIndex(int(b)) for b in wheel_bodies]
         self._belly_obj = None if belly_body is None else BodyIndex(int(belly_body))
         n = len(self._wheels)
+        self._n = n
+        self._soil_index = self.DeclareAbstractParameter(AbstractValue.Make(soil))
+        self._patch_index = self.DeclareDiscreteState(2 * n)
+        self.DeclarePeriodicDiscreteUpdateEvent(
+            period_sec=self._dt, offset_sec=0.0, update=self._update_patch
+        )
         self.body_poses_input = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()])
         )
@@ -109,36 +191,84 @@ class WheelRegolithContact(LeafSystem):
             "heightfield",
             AbstractValue.Make(Heightfield.from_array(np.zeros((4, 4)), resolution_m=1.0)),
         )
-        # One contact evaluation per context change, shared by the three outputs.
-        self._cache = self.DeclareCacheEntry(
-            description="wheel-soil contact",
+        # One contact evaluation per step, in two cached stages: the kinematics (geometry,
+        # loads, slip, Wong-Reece forces; from the inputs and the soil), shared by the patch
+        # update, and the forces (kinematics + patch state), shared by the three outputs.
+        # Drake's discrete plant (sampled output ports) steps in an unrestricted update,
+        # which the Simulator applies before discrete updates: the patch update therefore
+        # sees the plant's new state and computes the kinematics that the next step's
+        # forces reuse; only stage 2 is recomputed after the patch state changes.
+        soil_ticket = self.abstract_parameter_ticket(AbstractParameterIndex(self._soil_index))
+        self._kinematics = self.DeclareCacheEntry(
+            description="wheel-soil contact kinematics",
             value_producer=ValueProducer(
                 allocate=lambda: AbstractValue.Make(None),
-                calc=lambda context, out: out.set_value(self._compute(context)),
+                calc=lambda context, out: out.set_value(self._compute_kinematics(context)),
             ),
             prerequisites_of_calc={
                 self.input_port_ticket(self.body_poses_input.get_index()),
                 self.input_port_ticket(self.body_spatial_velocities_input.get_index()),
                 self.input_port_ticket(self.heightfield_input.get_index()),
+                soil_ticket,
             },
         )
+        self._cache = self.DeclareCacheEntry(
+            description="wheel-soil contact forces",
+            value_producer=ValueProducer(
+                allocate=lambda: AbstractValue.Make(None),
+                calc=lambda context, out: out.set_value(self._compute(context)),
+            ),
+            prerequisites_of_calc={
+                self._kinematics.ticket(),
+                self.discrete_state_ticket(DiscreteStateIndex(self._patch_index)),
+                soil_ticket,
+            },
+        )
+        cached = {self._cache.ticket()}
         self.spatial_forces_output = self.DeclareAbstractOutputPort(
             "spatial_forces",
             lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
             self._calc_forces,
+            prerequisites_of_calc=cached,
         )
         self.wheel_state_output = self.DeclareVectorOutputPort(
-            "wheel_state", BasicVector(len(WHEEL_STATE_FIELDS) * n), self._calc_wheel_state
+            "wheel_state",
+            BasicVector(len(WHEEL_STATE_FIELDS) * n),
+            self._calc_wheel_state,
+            prerequisites_of_calc=cached,
         )
         self.off_terrain_output = self.DeclareVectorOutputPort(
-            "off_terrain", BasicVector(1), self._calc_off_terrain
+            "off_terrain", BasicVector(1), self._calc_off_terrain, prerequisites_of_calc=cached
         )
 
+    # -- parameters and state -------------------------------------------------------------
+    def get_soil(self, context) -> tm.SoilParams:
+        """The soil in ``context`` (this system's context)."""
+        return context.get_abstract_parameter(self._soil_index).get_value()
+
+    def set_soil(self, context, soil: tm.SoilParams) -> None:
+        """Replaces the soil in ``context``."""
+        if not isinstance(soil, tm.SoilParams):
+            raise TypeError(f"soil must be a SoilParams, got {type(soil).__name__}")
+        context.get_mutable_abstract_parameter(self._soil_index).set_value(soil)
+
+    def get_patch_displacement(self, context) -> np.ndarray:
+        """(n, 2) patch shear displacement ``(j_x, j_y)`` (m, contact frame) in ``context``."""
+        return context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
+
+    def set_patch_displacement(self, context, j) -> None:
+        """Sets the (n, 2) patch shear displacement (m) in ``context``."""
+        j = np.asarray(j, dtype=float)
+        if j.shape != (self._n, 2):
+            raise ValueError(f"patch displacement must have shape ({self._n}, 2), got {j.shape}")
+        context.get_mutable_discrete_state(self._patch_index).SetFromVector(j.ravel())
+
     # -- core ---------------------------------------------------------------------------
-    def _compute(self, context):
+    def _compute_kinematics(self, context) -> _Kinematics:
         poses = self.body_poses_input.Eval(context)
         vels = self.body_spatial_velocities_input.Eval(context)
         hf = self.heightfield_input.Eval(context)
+        soil = self.get_soil(context)
         w = self._wheel
         X = [poses[i] for i in self._wheels]
         p = np.array([x.translation() for x in X])
@@ -162,33 +292,30 @@ class WheelRegolithContact(LeafSystem):
         # Absolute spin about the axle: the rim's slip against the ground does not care
         # which body the wheel hangs from (a pitching rocker must not look like slip).
         spin = np.einsum("ij,ij->i", wv, axle)
-        slip = tm.slip_ratio(omega_r=spin * w.radius_m, v=v_x, v_eps=self._v_eps)
+        omega_r = spin * w.radius_m
+        slip = tm.slip_ratio(omega_r=omega_r, v=v_x, v_eps=self._v_eps)
         beta = tm.slip_angle(v_x=v_x, v_y=v_y, v_eps=self._v_eps)
-        N = tm.normal_force(z, z_dot, wheel=w, soil=self._soil) * on
-        f = tm.wheel_forces(
-            slip=slip,
-            slip_angle=beta,
-            W=N,
-            z=z,
-            wheel=w,
-            soil=self._soil,
-            # The soil is compacted by a wheel that translates or spins (digging in when
-            # immobilized): the resistance follows v + r omega, faded out near rest.
-            direction=tm.travel_direction(v_x + spin * w.radius_m, v_eps=self._dir_eps),
-        )
-        F = (
-            N[:, None] * g.n_W
-            + f.drawbar_pull[:, None] * g.forward_W
-            + f.lateral[:, None] * g.lateral_W
-        ) * on[:, None]
-        # Moment about the centre of F at the contact point, corrected so its axle
-        # component is the soil moment -torque (Wong-Reece) rather than the lever arm.
-        r_c = g.p_WC - p
-        M = _cross(r_c, F)
-        m_axle = np.einsum("ij,ij->i", M, axle)
-        tau = M + ((-f.torque * on) - m_axle)[:, None] * axle
+        N = tm.normal_force(z, z_dot, wheel=w, soil=soil) * on
+        # Static patch weight: 1 for a wheel that does not roll, 0 at driving speeds (exactly).
+        ws = tm.static_weight(omega_r, patch=self._patch)
+        if ws.max() < 1.0:
+            f = tm.wheel_forces(
+                slip=slip,
+                slip_angle=beta,
+                W=N,
+                z=z,
+                wheel=w,
+                soil=soil,
+                # The soil is compacted by a wheel that translates or spins (digging in
+                # when immobilized): the resistance follows v + r omega, faded out near
+                # rest.
+                direction=tm.travel_direction(v_x + omega_r, v_eps=self._dir_eps),
+            )
+            dynamic = (f.drawbar_pull, f.lateral, -f.torque)
+        else:  # no wheel rolls: the Wong-Reece forces have zero weight
+            dynamic = (np.zeros(self._n),) * 3
         state = np.stack(
-            [np.where(on, g.sinkage, 0.0), N, slip, beta, f.drawbar_pull * on, (~on).astype(float)],
+            [np.where(on, g.sinkage, 0.0), N, slip, beta, np.zeros(self._n), (~on).astype(float)],
             axis=1,
         )
         belly = None
@@ -212,33 +339,96 @@ class WheelRegolithContact(LeafSystem):
                 ft = -self._mu_belly * fn[:, None] * vt / np.maximum(vt_norm, 0.01)[:, None]
                 Fb = fn[:, None] * n_t + ft
                 belly = (Fb.sum(axis=0), np.cross(r_b, Fb).sum(axis=0))
-        return p, F, tau, state, belly, off
+        return _Kinematics(
+            p=p,
+            axle=axle,
+            n_W=g.n_W,
+            forward_W=g.forward_W,
+            lateral_W=g.lateral_W,
+            r_c=g.p_WC - p,
+            on=on,
+            state=state,
+            N=N,
+            slip_velocity=tm.patch_slip_velocity(v_x=v_x, v_y=v_y, omega_r=omega_r),
+            rolling_speed=omega_r,
+            patch_length=tm.patch_length(z, wheel=w, soil=soil),  # 0 out of contact (z = -1)
+            static_weight=ws,
+            dynamic=dynamic,
+            belly=belly,
+            off=off,
+        )
 
-    def _cached(self, context):
+    def _compute(self, context) -> _Contact:
+        k = self._kinematics.Eval(context)
+        fx, fy, m_soil = k.dynamic
+        ws = k.static_weight
+        if ws.max() > 0.0:
+            j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
+            fs = tm.patch_static_force(
+                j,
+                slip_velocity=k.slip_velocity,
+                N=k.N,
+                length=k.patch_length,
+                wheel=self._wheel,
+                soil=self.get_soil(context),
+                damping_ratio=self._patch.damping_ratio,
+            )
+            # The patch force acts at the rim: its moment about the axle is the lever arm's.
+            Fs = fs[:, :1] * k.forward_W + fs[:, 1:] * k.lateral_W
+            m_static = np.einsum("ij,ij->i", _cross(k.r_c, Fs), k.axle)
+            wd = 1.0 - ws
+            fx = ws * fs[:, 0] + wd * fx
+            fy = ws * fs[:, 1] + wd * fy
+            m_soil = ws * m_static + wd * m_soil
+        on = k.on
+        F = k.N[:, None] * k.n_W + fx[:, None] * k.forward_W + fy[:, None] * k.lateral_W
+        F *= on[:, None]
+        # Moment about the centre of F at the contact point, corrected so its axle
+        # component is the soil moment (Wong-Reece: -torque) rather than the lever arm.
+        M = _cross(k.r_c, F)
+        m_axle = np.einsum("ij,ij->i", M, k.axle)
+        tau = M + ((m_soil * on) - m_axle)[:, None] * k.axle
+        state = k.state.copy()
+        state[:, 4] = fx * on
+        return _Contact(F, tau, state, k.belly, k.off)
+
+    def _cached(self, context) -> _Contact:
         return self._cache.Eval(context)
 
+    def _update_patch(self, context, discrete_state):
+        k = self._kinematics.Eval(context)
+        j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
+        jn = tm.update_patch_displacement(
+            j,
+            slip_velocity=k.slip_velocity,
+            rolling_speed=k.rolling_speed,
+            length=k.patch_length,
+            dt=self._dt,
+            soil=self.get_soil(context),
+            saturation_moduli=self._patch.saturation_moduli,
+        )
+        discrete_state.get_mutable_vector(self._patch_index).SetFromVector(jn.ravel())
+
     def _calc_forces(self, context, output):
-        _p, F, tau, _, belly, _ = self._cached(context)
+        c = self._cached(context)
         forces = []
         for k, b in enumerate(self._wheel_index_objs):
             e = ExternallyAppliedSpatialForce()
             e.body_index = b
             e.p_BoBq_B = np.zeros(3)
             # Applied at the centre: the force plus its moment about the centre.
-            e.F_Bq_W = SpatialForce(tau[k], F[k])
+            e.F_Bq_W = SpatialForce(c.tau[k], c.F[k])
             forces.append(e)
-        if belly is not None:
+        if c.belly is not None:
             e = ExternallyAppliedSpatialForce()
             e.body_index = self._belly_obj
             e.p_BoBq_B = np.zeros(3)
-            e.F_Bq_W = SpatialForce(belly[1], belly[0])
+            e.F_Bq_W = SpatialForce(c.belly[1], c.belly[0])
             forces.append(e)
         output.set_value(forces)
 
     def _calc_wheel_state(self, context, output):
-        _, _, _, state, _, _ = self._cached(context)
-        output.SetFromVector(state.ravel())
+        output.SetFromVector(self._cached(context).state.ravel())
 
     def _calc_off_terrain(self, context, output):
-        *_, off = self._cached(context)
-        output.SetFromVector([1.0 if off else 0.0])
+        output.SetFromVector([1.0 if self._cached(context).off else 0.0])

@@ -57,10 +57,8 @@ the DEM, so they are not in the returned catalog and throw no ejecta.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -70,6 +68,7 @@ from scipy.spatial import cKDTree
 
 from lunar_drake import rng as rng_mod
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.files import atomic_path
 from lunar_drake.terrain.grid import GridSpec
 from lunar_drake.terrain.sfd import (
     CraterSFD,
@@ -265,17 +264,13 @@ def _write_csv(path, header: str, cols: Sequence[Sequence[str]]) -> Path:
 
 
 def _atomic_write_text(path: Path, text: str) -> Path:
-    """Writes ``text`` to a temporary file beside ``path`` and renames it into place."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    """Writes ``text`` (UTF-8, ``\n`` line ends) to a temporary file beside ``path`` and
+    renames it into place (:func:`lunar_drake.files.atomic_path`)."""
+    with (
+        atomic_path(path, what="catalog") as tmp,
+        open(tmp, "w", encoding="utf-8", newline="") as f,
+    ):
+        f.write(text)
     return path
 
 

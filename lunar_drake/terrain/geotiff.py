@@ -14,9 +14,9 @@ without a geotransform, :class:`~lunar_drake.errors.RasterError`; a missing, geo
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
-import uuid
 import warnings
 from dataclasses import dataclass
 
@@ -32,9 +32,11 @@ from lunar_drake.errors import (
     ConfigError,
     OutOfBoundsError,
     OutOfRangeError,
+    OutputError,
     RasterError,
     RasterNotFoundError,
 )
+from lunar_drake.files import temp_sibling
 from lunar_drake.terrain.crs import require_projected_metres
 
 __all__ = [
@@ -73,25 +75,40 @@ class RasterInfo:
     block_shape: tuple[int, int]
 
 
+# Writers below keep their own commit (not lunar_drake.files.atomic_path) because GDAL
+# may write a PAM sidecar (.aux.xml) beside the temporary file, which moves with it.
+
+
 def _temp_name(path: str) -> str:
-    directory, name = os.path.split(os.path.abspath(path))
-    return os.path.join(directory, f".{name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
+    return os.fspath(temp_sibling(os.path.abspath(path)))
 
 
 def _check_parent(path: str) -> None:
     parent = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(parent):
-        raise RasterNotFoundError(
-            f"cannot write raster '{path}': directory '{parent}' does not exist"
-        )
+        why = f"'{parent}' is not a directory"
+        if not os.path.exists(parent):
+            why = f"directory '{parent}' does not exist"
+        raise RasterNotFoundError(f"cannot write raster '{path}': {why}")
 
 
 def _remove_quietly(path: str) -> None:
+    """Removes a temporary file and its sidecar; never raises, so that cleaning up after
+    an error cannot hide that error."""
     for p in (path, path + ".aux.xml"):
-        try:
+        with contextlib.suppress(OSError):
             os.remove(p)
-        except FileNotFoundError:
-            pass
+
+
+def _create(tmp: str, path: str, profile: dict):
+    """Opens temporary file ``tmp`` for writing; a file GDAL cannot create (no permission,
+    a special file system) raises OutputError naming ``path`` and GDAL's reason."""
+    try:
+        return rasterio.open(tmp, "w", **profile)
+    except RasterioError as exc:
+        _remove_quietly(tmp)
+        reason = str(exc).replace(tmp, os.path.basename(path))
+        raise OutputError(f"cannot write raster '{path}': {reason}") from None
 
 
 def _commit(tmp: str, path: str) -> None:
@@ -188,7 +205,7 @@ def write_geotiff(path, array, *, transform, crs, nodata=None, compress=None) ->
     _check_parent(path)
     tmp = _temp_name(path)
     try:
-        with rasterio.open(tmp, "w", **profile) as ds:
+        with _create(tmp, path, profile) as ds:
             ds.write(arr)
         _commit(tmp, path)
     except BaseException:
@@ -270,7 +287,7 @@ class GeoTiffWriter:
         _check_parent(self.path)
         self._tmp = _temp_name(self.path)
         try:
-            self._ds = rasterio.open(self._tmp, "w", **self._profile)
+            self._ds = _create(self._tmp, self.path, self._profile)
         except BaseException:
             _remove_quietly(self._tmp)
             self._tmp = None
@@ -278,29 +295,35 @@ class GeoTiffWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        ds, tmp = self._ds, self._tmp
-        self._ds, self._tmp = None, None
+        # Detach under the lock: a write still running in a worker thread (e.g. after a
+        # Ctrl-C in the main thread) finishes first, later ones see a closed writer.
+        with self._lock:
+            ds, tmp = self._ds, self._tmp
+            self._ds, self._tmp = None, None
         if ds is None or tmp is None:
+            return
+        if exc_type is not None:
+            # Leaving on an error: discard the file; nothing here may replace that error.
+            with contextlib.suppress(Exception):
+                ds.close()
+            _remove_quietly(tmp)
             return
         canon = None
         try:
             ds.close()
-            if exc_type is None:
-                # Windows written from several threads land in the file in completion
-                # order; a sequential GDAL copy puts the blocks in canonical order, so the
-                # file's bytes depend only on its pixels (not on tiling or workers).
-                canon = _temp_name(self.path)
-                opts = {k: v for k, v in self._profile.items() if k in _CREATION_KEYS}
-                rasterio.shutil.copy(tmp, canon, driver="GTiff", **opts)
-                _remove_quietly(tmp)
-                _commit(canon, self.path)
+            # Windows written from several threads land in the file in completion order;
+            # a sequential GDAL copy puts the blocks in canonical order, so the file's
+            # bytes depend only on its pixels (not on tiling or workers).
+            canon = _temp_name(self.path)
+            opts = {k: v for k, v in self._profile.items() if k in _CREATION_KEYS}
+            rasterio.shutil.copy(tmp, canon, driver="GTiff", **opts)
+            _remove_quietly(tmp)
+            _commit(canon, self.path)
         except BaseException:
             _remove_quietly(tmp)
             if canon is not None:
                 _remove_quietly(canon)
             raise
-        if exc_type is not None:
-            _remove_quietly(tmp)
 
     def write(self, array, *, row0: int, col0: int, band: int | None = None) -> None:
         """Write ``array`` with its top-left pixel at global ``(row0, col0)``.

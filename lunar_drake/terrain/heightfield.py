@@ -516,7 +516,7 @@ class Heightfield:
             bad = np.flatnonzero(~inside)
             i = int(bad[0])
             raise OutOfBoundsError(
-                f"site point (x={float(xf[i])!r}, y={float(yf[i])!r}) m is outside the raster "
+                f"site point (x={float(xf[i]):.6g}, y={float(yf[i]):.6g}) m is outside the raster "
                 "extent "
                 f"x in [{b.left:g}, {b.right:g}] m, y in [{b.bottom:g}, {b.top:g}] m "
                 f"({bad.size} of {xf.size} points outside)"
@@ -533,7 +533,7 @@ class Heightfield:
         bad = np.flatnonzero(np.isnan(result))
         i = int(bad[0])
         return NoDataError(
-            f"{what} query at site point (x={float(xf[i])!r}, y={float(yf[i])!r}) m touches "
+            f"{what} query at site point (x={float(xf[i]):.6g}, y={float(yf[i]):.6g}) m touches "
             "nodata (NaN) "
             f"pixels of '{self._src.name}' ({bad.size} of {xf.size} points affected)"
         )

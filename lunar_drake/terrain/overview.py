@@ -1,22 +1,25 @@
 """overview.png for a synthesized site: hillshade with craters and rocks, and the
-catalog's crater SFD against the model."""
+catalog's crater SFD against the model.
+
+Drawn with matplotlib's object-oriented API (a :class:`matplotlib.figure.Figure`, no
+pyplot, no ``matplotlib.use``), so it never changes the backend of the caller (a
+notebook keeps its inline plots).
+"""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
+from lunar_drake.files import atomic_path
+
 
 def write_overview(products, *, config, path: str | Path, max_px: int = 1024) -> Path:
     """Writes the two-panel overview figure atomically and returns its path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import rasterio
     from matplotlib.collections import PatchCollection
+    from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
     from lunar_drake.terrain import sfd as sfd_mod
@@ -31,7 +34,8 @@ def write_overview(products, *, config, path: str | Path, max_px: int = 1024) ->
     res = grid.resolution_m * grid.nrows / z.shape[0]
     shade = hillshade(z.astype(np.float32), resolution_m=res, azimuth_deg=135.0, altitude_deg=15.0)
 
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(15, 7), gridspec_kw={"width_ratios": [1.1, 1]})
+    fig = Figure(figsize=(15, 7))
+    ax0, ax1 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1]})
     ext = (grid.x_min, grid.x_min + grid.width_m, grid.y_max - grid.height_m, grid.y_max)
     ax0.imshow(shade, cmap="gray", extent=ext, origin="upper", vmin=0, vmax=1)
     cr = products.craters
@@ -78,8 +82,6 @@ def write_overview(products, *, config, path: str | Path, max_px: int = 1024) ->
     ax1.grid(True, which="both", alpha=0.3)
     ax1.legend()
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
+    with atomic_path(path, what="overview figure") as tmp:
+        fig.savefig(tmp, dpi=110)
     return path

@@ -19,6 +19,7 @@ threaded scheduler (numpy releases the GIL).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses as dc
 import hashlib
 import json
@@ -26,13 +27,15 @@ import os
 import shutil
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import dask
 import numpy as np
 
 from lunar_drake import rng
-from lunar_drake.errors import ConfigError, NoDataError, OutOfRangeError
+from lunar_drake.errors import ConfigError, NoDataError, OutOfRangeError, OutputError
+from lunar_drake.files import atomic_path, staged_directory
 from lunar_drake.terrain import albedo as albedo_mod
 from lunar_drake.terrain import catalog as catalog_mod
 from lunar_drake.terrain import craters as craters_mod
@@ -227,40 +230,107 @@ def _tiles(nrows: int, ncols: int, tile: int):
 
 
 def _run_tasks(tasks, *, workers: int, desc: str, progress: bool):
-    """Runs dask delayed tasks on the threaded scheduler with a tqdm bar."""
-    if progress:
-        from tqdm.auto import tqdm
+    """Runs dask delayed tasks on the threaded scheduler with a tqdm bar.
 
-        bar = tqdm(total=len(tasks), desc=desc, unit="tile", leave=False)
+    The tasks run on a thread pool of their own that is shut down before this returns or
+    raises: after an error or a Ctrl-C (``KeyboardInterrupt`` in the main thread) the
+    running tiles finish and the queued ones are dropped, so no worker still writes
+    when the caller closes the GeoTIFF writers and removes the partial site.
+    """
+    pool = ThreadPoolExecutor(workers, thread_name_prefix="lunar-drake-synth")
+    bar = None
+    try:
+        if progress:
+            from tqdm.auto import tqdm
 
-        class _Bar(dask.callbacks.Callback):
-            def _posttask(self, key, result, dsk, state, id):
-                if isinstance(key, tuple) and str(key[0]).startswith("tile-"):
-                    bar.update(1)
-                elif isinstance(key, str) and key.startswith("tile-"):
-                    bar.update(1)
+            bar = tqdm(total=len(tasks), desc=desc, unit="tile", leave=False)
 
-        with _Bar():
-            dask.compute(*tasks, scheduler="threads", num_workers=workers)
-        bar.close()
-    else:
-        dask.compute(*tasks, scheduler="threads", num_workers=workers)
+            class _Bar(dask.callbacks.Callback):
+                def _posttask(self, key, result, dsk, state, id):
+                    if isinstance(key, tuple) and str(key[0]).startswith("tile-"):
+                        bar.update(1)
+                    elif isinstance(key, str) and key.startswith("tile-"):
+                        bar.update(1)
+
+            with _Bar():
+                dask.compute(*tasks, scheduler="threads", pool=pool)
+        else:
+            dask.compute(*tasks, scheduler="threads", pool=pool)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        if bar is not None:
+            bar.close()
+
+
+_LEFTOVER_PREFIXES = (".synth-",)
+
+
+def _check_site_dir(out_dir: Path) -> None:
+    """A site directory is replaced as a whole on success, so an existing ``out_dir``
+    may hold only site outputs (a previous site) and leftovers of interrupted builds;
+    anything else (``--out .``, a data folder) is refused before any work starts."""
+    if not out_dir.is_dir():
+        return
+    allowed = set(OUTPUT_FILES) | {f"{f}.aux.xml" for f in OUTPUT_FILES}
+    try:
+        names = os.listdir(out_dir)
+    except OSError as exc:
+        raise OutputError(
+            f"cannot write site directory {str(out_dir)!r}: {exc.strerror or exc}"
+        ) from None
+    foreign = sorted(
+        n
+        for n in names
+        if n not in allowed
+        and not (n.startswith(_LEFTOVER_PREFIXES) or (n.startswith(".") and ".tmp" in n))
+    )
+    if foreign:
+        shown = ", ".join(repr(n) for n in foreign[:3]) + (", ..." if len(foreign) > 3 else "")
+        raise OutputError(
+            f"cannot write site directory {str(out_dir)!r}: it exists and holds "
+            f"{len(foreign)} entries that are not site outputs ({shown}); a site directory "
+            "is replaced as a whole, so give a new or empty directory"
+        )
 
 
 def synthesize_site(
     *, config: SynthConfig, out_dir: str | Path, progress: bool = True, overview: bool = True
 ) -> SiteProducts:
-    """Builds a synthetic site into ``out_dir`` (created if needed).
+    """Builds a synthetic site into ``out_dir`` (parents created if needed).
 
     Writes dem.tif (float32 m), albedo.tif (float32, normal albedo), rock_mask.tif
     (uint8), normals.tif (3 x int16, unit normal x/y/z times 32767, site frame),
-    craters.csv, rocks.csv, site.json and overview.png. Each file appears atomically.
-    """
-    import dask.callbacks
+    craters.csv, rocks.csv, site.json and overview.png (unless ``overview`` is False).
 
+    The site is built in a temporary sibling directory and renamed to ``out_dir`` only
+    when every file is written: a failed or interrupted (Ctrl-C) synthesis leaves no
+    ``out_dir`` and no temporary files, and an existing ``out_dir`` untouched; a
+    successful one replaces an existing ``out_dir`` as a whole.
+
+    Raises:
+        OutputError: before any work, if ``out_dir`` cannot be written (a parent is a
+            file, no permission, ...) or exists holding files that are not site outputs.
+    """
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    _check_site_dir(out_dir)
+    # "--out ." or "..": stage beside the directory's real name.
+    target = Path(os.path.abspath(out_dir)) if out_dir.name in ("", "..") else out_dir
+    with staged_directory(target, what="site directory") as stage:
+        products = _synthesize_into(
+            stage, config=config, progress=progress, overview=overview, t_start=t_start
+        )
+    products.out_dir = out_dir
+    products.stats["timing_s"]["total"] = time.perf_counter() - t_start
+    return products
+
+
+def _synthesize_into(
+    out_dir: Path, *, config: SynthConfig, progress: bool, overview: bool, t_start: float
+) -> SiteProducts:
+    """The pipeline of :func:`synthesize_site`, writing into the staging ``out_dir``."""
+    import dask.callbacks
+
     coarse, coarse_res, crs, origin = _coarse_dem(config)
     F = config.factor
     res = coarse_res / F
@@ -464,22 +534,16 @@ def synthesize_site(
                 zrange[1] = max(zrange[1], float(zt.max()))
                 rock_px[0] += int(mt.sum(dtype=np.int64))
 
-        for wtr in writers.values():
-            wtr.__enter__()
-        ok = False
-        try:
+        # Every writer is closed (committed on success, removed on an error) even when
+        # another one fails; the first error is the one raised.
+        with contextlib.ExitStack() as stack:
+            for wtr in writers.values():
+                stack.enter_context(wtr)
             tasks = [
                 dask.delayed(pass2, pure=False)(*t, dask_key_name=f"tile-2-{t[0]}-{t[1]}")
                 for t in _tiles(nrows, ncols, config.tile_px)
             ]
             _run_tasks(tasks, workers=config.workers, desc="rocks+albedo", progress=progress)
-            ok = True
-        finally:
-            for wtr in writers.values():
-                if ok:
-                    wtr.__exit__(None, None, None)
-                else:
-                    wtr.__exit__(RuntimeError, RuntimeError("synthesis failed"), None)
         t_pass2 = time.perf_counter()
     finally:
         shutil.rmtree(scratch_dir, ignore_errors=True)
@@ -537,8 +601,6 @@ def _config_json(config: SynthConfig) -> dict:
 
 
 def _write_json(path: Path, data) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "w") as f:
+    with atomic_path(path) as tmp, open(tmp, "w") as f:
         json.dump(data, f, indent=2, sort_keys=True)
         f.write("\n")
-    os.replace(tmp, path)

@@ -1,0 +1,129 @@
+"""Pure functions from a simulation's logs to its summary (no Drake, no files).
+
+Every number is rounded to a fixed number of decimals, so ``summary.json`` is
+byte-identical for the same scenario and seed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lunar_drake.scenario import Scenario
+from lunar_drake.simulation import SimulationLogs
+from lunar_drake.site import SiteData
+from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
+
+
+def _r(x, nd: int = 6):
+    return round(float(x), nd)
+
+
+def traverse(logs: SimulationLogs) -> dict:
+    """The rover's traverse from ground truth: distance (m), final pose (x, y, z m;
+    roll, pitch, yaw rad), maximum tilt (deg), maximum sinkage (m), mean slip while
+    moving, drive energy (J)."""
+    pose = logs.vectors["truth.pose"].data
+    ws = logs.vectors["truth.wheel_state"].data
+    energy = logs.vectors["truth.drive_energy"].data[:, 0]
+    nf = len(WHEEL_STATE_FIELDS)
+    xy = pose[:, :2]
+    dist = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) > 1 else 0.0
+    slip = ws[:, WHEEL_STATE_FIELDS.index("slip") :: nf]
+    sink = ws[:, WHEEL_STATE_FIELDS.index("sinkage_m") :: nf]
+    moving = np.abs(pose[:, 6]) + np.abs(pose[:, 7]) > 0.02
+    return {
+        "distance_m": _r(dist),
+        "final_pose": [_r(v) for v in pose[-1, :6]] if len(pose) else [],
+        "max_tilt_deg": _r(np.degrees(np.max(np.hypot(pose[:, 3], pose[:, 4]))), 4)
+        if len(pose)
+        else 0.0,
+        "max_sinkage_m": _r(np.max(sink)) if sink.size else 0.0,
+        "mean_slip_moving": _r(np.mean(slip[moving])) if moving.any() else 0.0,
+        "energy_J": _r(energy[-1], 4) if len(energy) else 0.0,
+    }
+
+
+def parked_drift(logs: SimulationLogs, *, settle_s: float = 2.0) -> dict | None:
+    """How far the rover moved while parked with its brakes on after its last drive:
+    from ``settle_s`` after the brakes engaged to the end (m, deg), or None when it never
+    parked after driving for that long."""
+    brake = logs.vectors["flight.brake_command"]
+    twist = logs.vectors["flight.twist_command"].data
+    pose = logs.vectors["truth.pose"]
+    on = brake.data[:, 0] > 0.5
+    drove = np.flatnonzero(np.any(twist != 0.0, axis=1))
+    if not len(drove) or not on[-1]:
+        return None
+    # The last stretch of braking after the last drive command.
+    k = int(drove[-1])
+    rest = np.flatnonzero(~on[k:])
+    start = k + (int(rest[-1]) + 1 if len(rest) else 0)
+    t0 = brake.times[start] + settle_s
+    i0 = int(np.searchsorted(pose.times, t0))
+    if i0 >= len(pose.times) - 1:
+        return None
+    p = pose.data
+    return {
+        "from_s": _r(pose.times[i0], 3),
+        "duration_s": _r(pose.times[-1] - pose.times[i0], 3),
+        "drift_m": _r(np.linalg.norm(p[-1, :2] - p[i0, :2])),
+        "yaw_change_deg": _r(np.degrees(np.angle(np.exp(1j * (p[-1, 5] - p[i0, 5])))), 4),
+    }
+
+
+def localization(logs: SimulationLogs) -> dict:
+    """The on-board estimate against truth at the end: horizontal position error (m) and
+    its ratio to the distance driven; heading error (deg)."""
+    est = logs.vectors["flight.pose_estimate"]
+    pose = logs.vectors["truth.pose"].data
+    if not len(pose):
+        return {}
+    e = est.data[-1]
+    err = float(np.linalg.norm(e[:2] - pose[-1, :2]))
+    yaw_err = float(np.degrees(np.angle(np.exp(1j * (e[5] - pose[-1, 5])))))
+    dist = traverse(logs)["distance_m"]
+    return {
+        "final_position_error_m": _r(err),
+        "error_per_distance": _r(err / dist) if dist > 1e-6 else None,
+        "final_heading_error_deg": _r(yaw_err, 4),
+    }
+
+
+def link_stats(logs: SimulationLogs) -> dict:
+    """Per direction: messages and bytes sent, delivered, still in flight, and the
+    delivery latency (s; min and max)."""
+    out = {}
+    for direction in ("uplink", "downlink"):
+        rows = [r for r in logs.link if r.direction == direction]
+        got = [r for r in rows if np.isfinite(r.t_received)]
+        lat = [r.t_received - r.t_sent for r in got]
+        out[direction] = {
+            "messages": len(rows),
+            "bytes": int(sum(r.bytes for r in rows)),
+            "delivered": len(got),
+            "in_flight_at_end": len(rows) - len(got),
+            "dropped": sum(1 for r in rows if r.dropped),
+            "latency_s": [_r(min(lat)), _r(max(lat))] if lat else None,
+        }
+    return out
+
+
+def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """The deterministic summary of a run (``summary.json``)."""
+    tel = logs.telemetry
+    summary = {
+        "scenario": scenario.name,
+        "random_seed": scenario.random_seed,
+        "simulated_s": _r(logs.simulated_s),
+        "stop_reason": logs.stop_reason,
+        "diagram": "mission",
+        "systems": logs.systems,
+        "site": site.info,
+        "rover": traverse(logs),
+        "parked": parked_drift(logs),
+        "localization": localization(logs),
+        "link": link_stats(logs),
+        "telemetry_received": len(tel.seq),
+        "camera_frames": int(logs.frames_written),
+    }
+    return summary

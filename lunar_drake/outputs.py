@@ -1,0 +1,130 @@
+"""Writing a run directory from a simulation's logs and summary.
+
+A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake run
+--scenario RUN/scenario.yaml`` reproduces the run), ``summary.json`` (deterministic),
+``timing.json`` (wall-clock figures), the CSV logs in :data:`LOG_FILES`,
+``telemetry.csv`` (what the ground received), ``link.csv`` (every message over the
+link), ``frames/`` (written during the simulation) and ``meshcat.html`` (with Meshcat).
+The CLI builds it in a temporary sibling directory and swaps it in when complete
+(:func:`lunar_drake.files.staged_directory`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from lunar_drake.comms.link import LINK_RECORD_FIELDS
+from lunar_drake.files import atomic_path, atomic_write_text
+from lunar_drake.scenario import Scenario
+from lunar_drake.scenario_files import dump_scenario
+from lunar_drake.simulation import SimulationLogs
+
+#: Logged port -> CSV file (columns: ``t_s`` then the port's columns).
+LOG_FILES = {
+    "truth.pose": "truth.csv",
+    "truth.wheel_state": "wheels.csv",
+    "truth.drive_energy": "energy.csv",
+    "truth.imu_bias": "imu_bias.csv",
+    "rover.imu": "imu.csv",
+    "rover.star_tracker": "star_tracker.csv",
+    "rover.wheel_encoders": "encoders.csv",
+    "flight.twist_command": "twist_command.csv",
+    "flight.brake_command": "brakes.csv",
+    "flight.status": "flight_status.csv",
+    "flight.pose_estimate": "pose_estimate.csv",
+}
+
+
+#: Everything a run directory may hold (a rerun may replace a directory holding only these).
+RUN_DIR_NAMES = frozenset(
+    [
+        "scenario.yaml",
+        "summary.json",
+        "timing.json",
+        *LOG_FILES.values(),
+        "telemetry.csv",
+        "link.csv",
+        "frames",
+        "meshcat.html",
+    ]
+)
+
+
+def _fmt(v) -> str:
+    return f"{v:.9g}"
+
+
+def write_csv(path: Path, header, rows) -> None:
+    """Writes a CSV atomically: ``header`` (names) then ``rows`` (lists of strings)."""
+    with atomic_path(path, what="log") as tmp, open(tmp, "w") as f:
+        f.write(",".join(header) + "\n")
+        for row in rows:
+            f.write(",".join(row) + "\n")
+
+
+def run_files() -> list[str]:
+    """The files :func:`write_run` writes (frames and Meshcat aside)."""
+    return [
+        "scenario.yaml",
+        "summary.json",
+        "timing.json",
+        *LOG_FILES.values(),
+        "telemetry.csv",
+        "link.csv",
+    ]
+
+
+def write_run(
+    out_dir: str | Path,
+    *,
+    scenario: Scenario,
+    logs: SimulationLogs,
+    summary: dict,
+    timing: dict,
+    meshcat_html: str | None = None,
+) -> list[Path]:
+    """Writes the run directory's files into ``out_dir`` (which must exist); returns
+    their paths."""
+    out = Path(out_dir)
+    paths = [
+        atomic_write_text(out / "scenario.yaml", dump_scenario(scenario)),
+        atomic_write_text(
+            out / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n"
+        ),
+        atomic_write_text(out / "timing.json", json.dumps(timing, indent=2, sort_keys=True) + "\n"),
+    ]
+    for port, name in LOG_FILES.items():
+        log = logs.vectors[port]
+        rows = (
+            [f"{t:.6f}", *(_fmt(v) for v in row)]
+            for t, row in zip(log.times, log.data, strict=True)
+        )
+        write_csv(out / name, ["t_s", *log.columns], rows)
+        paths.append(out / name)
+    tel = logs.telemetry
+    rows = (
+        [f"{tr:.6f}", f"{ts:.6f}", str(int(s)), *(_fmt(v) for v in p)]
+        for tr, ts, s, p in zip(tel.t_received, tel.t_sent, tel.seq, tel.packets, strict=True)
+    )
+    write_csv(out / "telemetry.csv", ["t_received_s", "t_sent_s", "seq", *tel.columns], rows)
+    paths.append(out / "telemetry.csv")
+    rows = (
+        [
+            r.direction,
+            r.channel,
+            r.topic,
+            str(r.seq),
+            str(r.bytes),
+            f"{r.t_sent:.6f}",
+            f"{r.t_received:.6f}" if math.isfinite(r.t_received) else "",
+            "1" if r.dropped else "0",
+        ]
+        for r in logs.link
+    )
+    write_csv(out / "link.csv", LINK_RECORD_FIELDS, rows)
+    paths.append(out / "link.csv")
+    if meshcat_html is not None:
+        paths.append(atomic_write_text(out / "meshcat.html", meshcat_html))
+    return paths

@@ -1,0 +1,220 @@
+"""Loading and writing scenarios: named scenarios, overrides, and clear errors.
+
+Two file layouts are read:
+
+* a *scenario file* holds named scenarios at its top level (see
+  ``lunar_drake/scenarios/default.yaml``); ``FILE.yaml:NAME`` picks one;
+* a *run's* ``scenario.yaml`` is one bare scenario (its top-level keys are
+  :class:`~lunar_drake.scenario.Scenario` fields), as :func:`dump_scenario` writes it,
+  so ``lunar-drake run --scenario RUN/scenario.yaml`` reproduces that run.
+
+Before Drake's ``yaml_load_typed`` sees a document it is parsed with PyYAML's safe
+loader (YAML never executes code) and walked against the schema, so a malformed file, a
+Python tag or an unknown key (at any depth) is a one-line
+:class:`~lunar_drake.errors.ConfigError` naming the file, the line and the full key
+(``rover.description.wheel_radius``). Relative paths in ``terrain.dem`` and
+``lighting.extra_kernels`` are resolved against the scenario file's directory, so the
+written ``scenario.yaml`` holds absolute paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import typing
+from importlib import resources
+from pathlib import Path
+
+import yaml
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+
+from lunar_drake.errors import ConfigError
+from lunar_drake.scenario import Scenario, validate_scenario
+
+_STANDARD_TAGS = {
+    "tag:yaml.org,2002:" + t for t in ("str", "int", "float", "bool", "null", "map", "seq")
+}
+
+
+def default_scenario_file() -> Path:
+    """The scenario file shipped with the package."""
+    return Path(str(resources.files("lunar_drake") / "scenarios" / "default.yaml"))
+
+
+def _where(source: str, node) -> str:
+    mark = getattr(node, "start_mark", None)
+    return f"{source}, line {mark.line + 1}" if mark is not None else source
+
+
+def _compose(text: str, source: str):
+    """The YAML node tree of ``text`` (safe: nothing is constructed)."""
+    try:
+        return yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f", line {mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"{source}{line}: malformed YAML: {problem}") from None
+
+
+def _check_tags(node, source: str) -> None:
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if n.tag not in _STANDARD_TAGS:
+            raise ConfigError(
+                f"{_where(source, n)}: YAML tag {n.tag!r} is not allowed (scenarios are plain data)"
+            )
+        if isinstance(n, yaml.MappingNode):
+            for k, v in n.value:
+                stack += [k, v]
+        elif isinstance(n, yaml.SequenceNode):
+            stack += list(n.value)
+
+
+def _schema_fields(schema) -> dict | None:
+    """field name -> type of a dataclass or a Drake config class, else None."""
+    if dc.is_dataclass(schema):
+        hints = typing.get_type_hints(schema)
+        return {f.name: hints[f.name] for f in dc.fields(schema)}
+    fields = getattr(schema, "__fields__", None)
+    if fields is not None and not isinstance(fields, dict):
+        return {f.name: f.type for f in fields}
+    return None
+
+
+def _check_keys(node, schema, path: str, source: str) -> None:
+    """Raises ConfigError for the first mapping key that ``schema`` does not have."""
+    fields = _schema_fields(schema)
+    if fields is None:
+        origin = typing.get_origin(schema)
+        if origin is list and isinstance(node, yaml.SequenceNode):
+            (item,) = typing.get_args(schema)
+            for k, child in enumerate(node.value):
+                _check_keys(child, item, f"{path}[{k}]", source)
+        return
+    if not isinstance(node, yaml.MappingNode):
+        if isinstance(node, yaml.ScalarNode) and node.tag.endswith(":null"):
+            return
+        raise ConfigError(
+            f"{_where(source, node)}: {path or 'the scenario'} must be a mapping of keys "
+            f"({', '.join(sorted(fields))}), not {node.value!r}"
+        )
+    for key_node, value in node.value:
+        key = key_node.value
+        full = f"{path}.{key}" if path else str(key)
+        if key not in fields:
+            raise ConfigError(
+                f"{_where(source, key_node)}: unknown key {full!r}; allowed keys"
+                f"{' of ' + repr(path) if path else ''}: {', '.join(sorted(fields))}"
+            )
+        _check_keys(value, fields[key], full, source)
+
+
+def _is_bare(node) -> bool:
+    """A run's scenario.yaml: a mapping whose keys are Scenario fields."""
+    names = {f.name for f in dc.fields(Scenario)}
+    return (
+        isinstance(node, yaml.MappingNode)
+        and bool(node.value)
+        and all(k.value in names for k, _ in node.value)
+    )
+
+
+def _read(path: Path) -> str:
+    if not path.is_file():
+        raise ConfigError(f"scenario file {str(path)!r} does not exist")
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"scenario file {str(path)!r} cannot be read: {exc}") from None
+
+
+def scenario_names(*, filename: str | Path | None = None) -> list[str]:
+    """Names of the scenarios in a scenario file (``[]`` for a run's bare scenario)."""
+    path = Path(filename) if filename else default_scenario_file()
+    root = _compose(_read(path), str(path))
+    if root is None or _is_bare(root):
+        return []
+    if not isinstance(root, yaml.MappingNode):
+        raise ConfigError(f"{path}: a scenario file must map scenario names to scenarios")
+    return sorted(k.value for k, _ in root.value)
+
+
+def _drake_load(*, schema_defaults: Scenario, where: str, **kwargs) -> Scenario:
+    try:
+        return yaml_load_typed(schema=Scenario, defaults=schema_defaults, **kwargs)
+    except Exception as exc:  # Drake raises RuntimeError/TypeError on a bad value
+        msg = " ".join(str(exc).split())
+        raise ConfigError(f"{where}: invalid value: {msg}") from None
+
+
+def _resolve_paths(s: Scenario, base: Path) -> None:
+    if s.terrain.dem and not Path(s.terrain.dem).is_absolute():
+        s.terrain.dem = str((base / s.terrain.dem).resolve())
+    s.lighting.extra_kernels = [
+        k if Path(k).is_absolute() else str((base / k).resolve()) for k in s.lighting.extra_kernels
+    ]
+
+
+def load_scenario(
+    *, filename: str | Path | None = None, scenario_name: str = "default", scenario_text: str = "{}"
+) -> Scenario:
+    """Loads ``scenario_name`` from ``filename`` (default: the packaged file) -- or the
+    bare scenario a run wrote -- applies the ``scenario_text`` YAML overrides and
+    validates the result.
+
+    Raises:
+        ConfigError: missing or malformed file, a Python tag, an unknown name or key (at
+            any depth), a malformed value, or a value out of range.
+    """
+    path = Path(filename) if filename else default_scenario_file()
+    text = _read(path)
+    source = str(path)
+    root = _compose(text, source)
+    if root is not None:
+        _check_tags(root, source)
+    if root is not None and _is_bare(root):
+        _check_keys(root, Scenario, "", source)
+        result = _drake_load(schema_defaults=Scenario(), where=source, data=text)
+    else:
+        names = scenario_names(filename=path)
+        if scenario_name not in names:
+            raise ConfigError(
+                f"scenario {scenario_name!r} not found in {source!r}; choose one of {names}"
+            )
+        node = next(v for k, v in root.value if k.value == scenario_name)
+        _check_keys(node, Scenario, "", f"{source} (scenario {scenario_name!r})")
+        result = _drake_load(
+            schema_defaults=Scenario(),
+            where=f"{source} (scenario {scenario_name!r})",
+            filename=str(path),
+            child_name=scenario_name,
+        )
+        if not result.name:
+            result.name = scenario_name
+    _resolve_paths(result, path.parent)
+    result = apply_overrides(result, scenario_text, source="--scenario-text")
+    return result
+
+
+def apply_overrides(scenario: Scenario, text: str, *, source: str = "overrides") -> Scenario:
+    """``scenario`` with the YAML mapping ``text`` merged on top, validated. Relative
+    paths in the overrides are resolved against the working directory."""
+    node = _compose(text or "{}", source)
+    if node is not None:
+        _check_tags(node, source)
+        _check_keys(node, Scenario, "", source)
+        scenario = _drake_load(schema_defaults=scenario, where=source, data=text)
+        _resolve_paths(scenario, Path.cwd())
+    validate_scenario(scenario)
+    return scenario
+
+
+def scenario_from_text(text: str) -> Scenario:
+    """A validated scenario from a YAML mapping (no name level), over the defaults."""
+    return apply_overrides(Scenario(), text, source="scenario text")
+
+
+def dump_scenario(scenario: Scenario) -> str:
+    """YAML text of a scenario (loads back to an equal scenario)."""
+    return yaml_dump_typed(scenario)

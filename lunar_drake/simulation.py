@@ -1,0 +1,290 @@
+"""simulate(): build the mission diagram, run it, and return what it recorded.
+
+The CLI, notebooks, the slip study and trade sweeps all make the same three calls::
+
+    logs = simulate(scenario=scenario, site=site)        # this module
+    summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
+    outputs.write_run(out_dir, scenario=scenario, logs=logs, summary=summary)
+
+``simulate`` writes no files except camera frames (into ``frames_dir``, when given: they
+are too large to hold in memory). Its result holds plain numpy arrays and dataclasses,
+so it pickles (sweeps run it in worker processes).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import re
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
+from lunar_drake.errors import SimulationError
+from lunar_drake.scenario import Scenario
+from lunar_drake.site import SiteData
+from lunar_drake.systems.body_pose_vector import BodyPoseVector
+from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
+
+_WHEELS = ("fl", "fr", "rl", "rr")
+_AXES6 = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps")
+_AXES6 += ("accel_x_mps2", "accel_y_mps2", "accel_z_mps2")
+
+#: Mission output ports logged every ``logging.period_s``, with their columns.
+LOGGED_PORTS = {
+    "truth.pose": BodyPoseVector.FIELDS,
+    "truth.wheel_state": tuple(f"{w}_{f}" for w in _WHEELS for f in WHEEL_STATE_FIELDS),
+    "truth.drive_energy": ("energy_J",),
+    "truth.imu_bias": tuple(f"bias_{a}" for a in _AXES6),
+    "rover.imu": _AXES6,
+    "rover.star_tracker": ("qw", "qx", "qy", "qz"),
+    "rover.wheel_encoders": tuple(f"{w}_angle_rad" for w in _WHEELS),
+    "flight.twist_command": ("vx_mps", "vy_mps", "wz_radps"),
+    "flight.brake_command": ("brake",),
+    "flight.status": ("mode", "command_seq"),
+    "flight.pose_estimate": ("x_m", "y_m", "z_rel_m", "roll_rad", "pitch_rad", "yaw_rad"),
+}
+
+
+@dc.dataclass
+class VectorLog:
+    """Samples of one vector port: ``times`` (n,) s and ``data`` (n, len(columns))."""
+
+    times: np.ndarray
+    data: np.ndarray
+    columns: tuple
+
+    def column(self, name: str) -> np.ndarray:
+        """One column's samples."""
+        return self.data[:, self.columns.index(name)]
+
+
+@dc.dataclass
+class ReceivedTelemetry:
+    """Telemetry as the ground received it: per packet its seq, send and reception times
+    (s) and the packet (rows of :data:`~lunar_drake.autonomy.telemetry.TELEMETRY_FIELDS`)."""
+
+    seq: np.ndarray
+    t_sent: np.ndarray
+    t_received: np.ndarray
+    packets: np.ndarray
+    columns: tuple = TELEMETRY_FIELDS
+
+
+@dc.dataclass
+class SimulationLogs:
+    """What one simulation recorded.
+
+    Attributes:
+        simulated_s: simulated time reached (s).
+        stop_reason: "duration reached", or why the run stopped early.
+        systems: names of the mission's subsystems, recursively (sorted).
+        vectors: port name -> :class:`VectorLog` (see :data:`LOGGED_PORTS`).
+        telemetry: what the ground received (:class:`ReceivedTelemetry`).
+        link: every message over the uplink and downlink
+            (:class:`~lunar_drake.comms.link.LinkRecord`).
+        frames_written: camera frames written to ``frames_dir``.
+        wall: wall-clock timing (s; not deterministic).
+    """
+
+    simulated_s: float
+    stop_reason: str
+    systems: list
+    vectors: dict
+    telemetry: ReceivedTelemetry
+    link: list
+    frames_written: int
+    wall: dict
+
+
+StopCheck = Callable[[float, np.ndarray], "str | None"]
+
+
+def _system_names(system) -> list[str]:
+    out = []
+    for s in system.GetSystems():
+        out.append(re.sub(r"@[0-9a-f]+$", "", s.get_name()))
+        if hasattr(s, "GetSystems"):
+            out += _system_names(s)
+    return out
+
+
+def simulate(
+    *,
+    scenario: Scenario,
+    site: SiteData,
+    meshcat=None,
+    progress: bool = False,
+    frames_dir: str | Path | None = None,
+    stop_when: StopCheck | None = None,
+    stop_check_period_s: float = 0.5,
+) -> SimulationLogs:
+    """Simulates ``scenario`` on ``site`` for ``scenario.simulation_duration`` seconds.
+
+    The run stops early, cleanly, when the rover leaves the terrain, or when
+    ``stop_when(t, truth_pose)`` (checked every ``stop_check_period_s`` of simulated
+    time; ``truth_pose`` as ``truth.pose``) returns a reason.
+
+    Args:
+        meshcat: a pydrake Meshcat to draw in (and record), or None (headless).
+        progress: show a progress bar in simulated seconds with the real-time factor.
+        frames_dir: write camera frames there (when the cameras are enabled).
+
+    Raises:
+        SimulationError: the integrator failed; the message has the simulated time.
+    """
+    from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+    from pydrake.systems.framework import DiagramBuilder, EventStatus
+    from pydrake.systems.primitives import LogVectorOutput
+
+    from lunar_drake.diagrams.mission import MakeMissionDiagram
+
+    t0 = time.perf_counter()
+    mission = MakeMissionDiagram(scenario=scenario, site=site, meshcat=meshcat)
+    builder = DiagramBuilder()
+    builder.AddSystem(mission)
+    period = scenario.logging.period_s
+    loggers = {
+        name: LogVectorOutput(mission.GetOutputPort(name), builder, period) for name in LOGGED_PORTS
+    }
+    writer = None
+    cam = scenario.sensors.camera
+    if frames_dir is not None and cam.enabled:
+        from pydrake.systems.sensors import ImageGrey8U
+
+        from lunar_drake.systems.frame_writer import FrameWriter
+
+        camera_period = 1.0 / cam.rate_hz
+        writer = builder.AddNamedSystem(
+            "frame_writer",
+            FrameWriter(
+                names=["left", "right"],
+                out_dir=frames_dir,
+                period_s=camera_period,
+                offset_s=(cam.delay_s % camera_period) + 1e-6,
+                preview_image_type=ImageGrey8U,
+            ),
+        )
+        builder.Connect(mission.GetOutputPort("camera.frame_index"), writer.frame_index_input)
+        for n in ("left", "right"):
+            builder.Connect(mission.GetOutputPort(f"camera.{n}.raw"), writer.raw_inputs[n])
+            builder.Connect(mission.GetOutputPort(f"camera.{n}.preview"), writer.preview_inputs[n])
+    diagram = builder.Build()
+    diagram.set_name("run")
+    simulator = Simulator(diagram)
+    ApplySimulatorConfig(scenario.simulator_config, simulator)
+    root = simulator.get_mutable_context()
+    mctx = mission.GetMyContextFromRoot(root)
+    off_port = mission.GetOutputPort("truth.off_terrain")
+    pose_port = mission.GetOutputPort("truth.pose")
+    hf = site.heightfield
+    end = float(scenario.simulation_duration)
+    stop_reason = ["duration reached"]
+    bar = _progress_bar(end, progress)
+    clock = {"next_check": 0.0, "next_bar": 0.0, "wall0": None}
+
+    def monitor(context):
+        t = context.get_time()
+        if off_port.Eval(mctx)[0] > 0.5:
+            x, y = pose_port.Eval(mctx)[:2]
+            b = hf.bounds
+            stop_reason[0] = (
+                f"rover left the terrain at t = {t:.2f} s, chassis at ({x:.2f}, {y:.2f}) m; "
+                f"site x in [{b.left:g}, {b.right:g}], y in [{b.bottom:g}, {b.top:g}] m"
+            )
+            return EventStatus.ReachedTermination(diagram, stop_reason[0])
+        if stop_when is not None and t >= clock["next_check"]:
+            clock["next_check"] = t + stop_check_period_s
+            why = stop_when(t, pose_port.Eval(mctx))
+            if why:
+                stop_reason[0] = why
+                return EventStatus.ReachedTermination(diagram, why)
+        if bar is not None and clock["wall0"] is not None and t >= clock["next_bar"]:
+            clock["next_bar"] = t + max(end / 200.0, 0.25)
+            _update_bar(bar, t, time.perf_counter() - clock["wall0"])
+        return EventStatus.DidNothing()
+
+    simulator.set_monitor(monitor)
+    if meshcat is not None:
+        meshcat.StartRecording(set_visualizations_while_recording=True)
+    try:
+        simulator.Initialize()
+        t_built = time.perf_counter()
+        clock["wall0"] = t_built - 1e-9
+        try:
+            simulator.AdvanceTo(end)
+        except (KeyboardInterrupt, SimulationError):
+            raise
+        except Exception as exc:  # Drake raises RuntimeError on integrator failures.
+            raise SimulationError(
+                f"simulation failed at t = {root.get_time():.3f} s: " + " ".join(str(exc).split())
+            ) from exc
+        t_sim = time.perf_counter()
+        if bar is not None:
+            _update_bar(bar, root.get_time(), t_sim - t_built)
+    finally:
+        if bar is not None:
+            bar.close()
+    if meshcat is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+    simulated = float(root.get_time())
+    vectors = {}
+    for name, logger in loggers.items():
+        log = logger.FindLog(root)
+        vectors[name] = VectorLog(
+            times=np.array(log.sample_times()),
+            data=np.array(log.data()).T,
+            columns=LOGGED_PORTS[name],
+        )
+    receiver = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.telemetry")
+    received = receiver.received(receiver.GetMyContextFromRoot(root))
+    telemetry = ReceivedTelemetry(
+        seq=np.array([d.message.seq for d in received], dtype=np.int64),
+        t_sent=np.array([d.message.t_sent_s for d in received], dtype=np.float64),
+        t_received=np.array([d.t_received_s for d in received], dtype=np.float64),
+        packets=np.array([d.message.payload for d in received], dtype=np.float64).reshape(
+            -1, len(TELEMETRY_FIELDS)
+        ),
+    )
+    link = []
+    for name in ("uplink", "downlink"):
+        sys = mission.GetSubsystemByName(name)
+        link += sys.records(sys.GetMyContextFromRoot(root))
+    frames = writer.frames_written(writer.GetMyContextFromRoot(root)) if writer else 0
+    return SimulationLogs(
+        simulated_s=simulated,
+        stop_reason=stop_reason[0],
+        systems=sorted(_system_names(mission)),
+        vectors=vectors,
+        telemetry=telemetry,
+        link=link,
+        frames_written=frames,
+        wall={
+            "build_s": t_built - t0,
+            "simulate_s": t_sim - t_built,
+            "realtime_factor": simulated / (t_sim - t_built) if t_sim > t_built else None,
+        },
+    )
+
+
+def _progress_bar(total: float, enabled: bool):
+    if not enabled or total <= 0:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=round(total, 3),
+        unit="sim s",
+        desc="simulating",
+        bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} sim s [{elapsed}<{remaining}{postfix}]",
+    )
+
+
+def _update_bar(bar, t: float, wall_s: float) -> None:
+    bar.n = round(min(t, bar.total), 3)
+    if wall_s > 0:
+        bar.set_postfix_str(f"{t / wall_s:.1f}x real time", refresh=False)
+    bar.refresh()
