@@ -86,6 +86,15 @@ def quaternion_from_rotation_matrix(R) -> np.ndarray:
 def rotation_matrix_from_quaternion(q) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4) = (w, x, y, z) (normalised)."""
     q = np.asarray(q, dtype=np.float64)
+    if q.ndim == 1:  # one quaternion: scalar arithmetic (a flight-software tick's case)
+        w, x, y, z = (q / np.sqrt(q @ q)).tolist()
+        return np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     return np.stack(

@@ -45,3 +45,18 @@ def test_hash_statistics():
     # different keys are uncorrelated
     m = rng.hash_normal(key + 1, i, j).astype(np.float64)
     assert abs(np.corrcoef(n.ravel(), m.ravel())[0, 1]) < 0.01
+
+
+def test_sample_stream_draws_what_sample_generator_draws():
+    """The re-keyed scratch generator gives each sample exactly its own Philox stream,
+    whatever was drawn from it before and in any order of samples."""
+    from lunar_drake.rng import SampleStream, sample_generator, stream_key
+
+    key = stream_key(7, "imu")
+    assert key >= 2**63  # the upper half of the keys, where a float64 would round
+    assert np.array_equal(sample_generator(key, 0).bit_generator.state["state"]["key"], [key, 0])
+    stream = SampleStream(key)
+    for k in (0, 5, 1, 2**40, 5):
+        stream.at(k + 1).standard_normal(7)  # leave the scratch generator mid-stream
+        got = stream.at(k).standard_normal(13)
+        np.testing.assert_array_equal(got, sample_generator(key, k).standard_normal(13))

@@ -390,7 +390,8 @@ def test_star_tracker_system_tracks_attitude_with_configured_noise():
     err_B = rot.rotation_log(np.swapaxes(R_true, 1, 2) @ rot.rotation_matrix_from_quaternion(q))
     std = err_B.std(axis=0) / ARCSEC
     np.testing.assert_allclose(std, [5.0, 5.0, 40.0], rtol=0.2)  # boresight = body z
-    assert np.all(np.abs(err_B).max(axis=0) < 4 * cfg.sigma_rad)
+    # 900 normal draws: P(any beyond 4.5 sigma) ~ 0.6 %, beyond 4 sigma it would be 6 %.
+    assert np.all(np.abs(err_B).max(axis=0) < 4.5 * cfg.sigma_rad)
 
 
 def test_wheel_encoders_on_plant_joints():
@@ -427,3 +428,21 @@ def test_wheel_encoders_on_plant_joints():
     res = 2 * math.pi / 4096
     np.testing.assert_allclose(angles / res, np.round(angles / res), atol=1e-9)
     assert np.all(np.abs(angles - true) <= res / 2 + 1e-9)
+
+
+def test_attitude_propagation_matches_rotation_matrices():
+    """The odometry's scalar quaternion step agrees with R_WB Exp(w dt) from Rodrigues'
+    matrices (an independent formulation), small angles included; the batched and the
+    one-quaternion matrix paths agree."""
+    from lunar_drake.autonomy.odometry import propagate_attitude
+
+    g = np.random.default_rng(5)
+    for scale in (1e-9, 1e-3, 1.0, 3.0):
+        q0 = rot.quaternion_from_rotation_matrix(rot.rotation_exp(g.normal(size=3)))
+        w = g.normal(size=3) * scale
+        q = propagate_attitude(q0, w, 0.02)
+        assert q[0] >= 0 and abs(np.linalg.norm(q) - 1.0) < 1e-15
+        expected = rot.rotation_matrix_from_quaternion(q0) @ rot.rotation_exp(w * 0.02)
+        np.testing.assert_allclose(rot.rotation_matrix_from_quaternion(q), expected, atol=1e-12)
+        batch = rot.rotation_matrix_from_quaternion(np.stack([q0, q]))
+        np.testing.assert_allclose(rot.rotation_matrix_from_quaternion(q), batch[1], atol=1e-15)

@@ -14,17 +14,14 @@ software does not know the terrain height, so z is relative to the start.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lunar_drake.dynamics.kinematics import (
     WheelGeometry,
     explicit_steer_twist,
     skid_steer_twist,
-)
-from lunar_drake.rotations import (
-    quaternion_from_rotation_matrix,
-    rotation_exp,
-    rotation_matrix_from_quaternion,
 )
 
 
@@ -48,7 +45,21 @@ def odometry_step(
 
 
 def propagate_attitude(q_WB, w_B, dt: float) -> np.ndarray:
-    """``q_WB`` (w, x, y, z) rotated by the body rate ``w_B`` (rad/s, body frame, e.g.
-    the gyro) held for ``dt`` s: ``R_WB Exp(w_B dt)``."""
-    R = rotation_matrix_from_quaternion(q_WB) @ rotation_exp(np.asarray(w_B, np.float64) * dt)
-    return quaternion_from_rotation_matrix(R)
+    """``q_WB`` (4,) = (w, x, y, z) rotated by the body rate ``w_B`` (3,) (rad/s, body
+    frame, e.g. the gyro) held for ``dt`` s: ``q_WB * Exp(w_B dt)``, normalised, w >= 0.
+    (Scalar arithmetic: one quaternion per flight tick.)"""
+    aw, ax, ay, az = (float(v) for v in q_WB)
+    tx, ty, tz = (float(v) * dt for v in w_B)
+    half = 0.5 * math.sqrt(tx * tx + ty * ty + tz * tz)
+    k = 0.5 - half * half / 12.0 if half < 1e-6 else math.sin(half) / (2.0 * half)
+    bw, bx, by, bz = math.cos(half), k * tx, k * ty, k * tz
+    q = np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+    q /= math.sqrt(q @ q)
+    return -q if q[0] < 0 else q

@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import dataclasses as dc
 
+import numba
 import numpy as np
 
-from lunar_drake.errors import NoDataError, OutOfBoundsError, OutOfRangeError
+from lunar_drake.errors import OutOfRangeError
 
 
 @dc.dataclass(frozen=True)
@@ -66,11 +67,7 @@ class WheelContactGeometry:
     off_terrain: np.ndarray
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.sqrt((v * v).sum(axis=-1, keepdims=True)), 1e-12)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (n, 3) arrays (np.cross is slow for tiny arrays)."""
     return np.stack(
         [
@@ -85,28 +82,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _safe_heights(heightfield, x: np.ndarray, y: np.ndarray):
     """Heights at points; flags points off the raster (one pixel margin) or on nodata
     (their height is -inf so they never touch)."""
-    b = heightfield.bounds
-    m = heightfield.resolution_m
-    ok = (
-        (x >= b.left + m)
-        & (x <= b.right - m)
-        & (y >= b.bottom + m)
-        & (y <= b.top - m)
-        & np.isfinite(x)
-        & np.isfinite(y)
-    )
-    z = np.full(x.shape, -np.inf)
-    if ok.all():
-        try:
-            return heightfield.height(x, y), ok
-        except NoDataError:
-            pass
-    for k in np.flatnonzero(ok.ravel()):
-        try:
-            z.ravel()[k] = heightfield.height(x.ravel()[k : k + 1], y.ravel()[k : k + 1])[0]
-        except (NoDataError, OutOfBoundsError):
-            ok.ravel()[k] = False
-    return z, ok
+    return heightfield.heights_within(x, y, margin_m=heightfield.resolution_m)
 
 
 def wheel_contact_geometry(
@@ -131,36 +107,14 @@ def wheel_contact_geometry(
         radius_m, width_m: wheel radius and width (m).
         sampling: footprint sampling pattern.
     """
-    p = np.asarray(p_WWo, dtype=float).reshape(-1, 3)
-    a = _unit(np.asarray(axle_W, dtype=float).reshape(-1, 3))
-    n_w = p.shape[0]
-    # Horizontal rolling direction (for sampling); robust when the axle is tilted.
-    f_h = _unit(np.stack([a[:, 1], -a[:, 0], np.zeros(n_w)], axis=1))  # a x z_up
-    s_h = np.stack([-f_h[:, 1], f_h[:, 0], np.zeros(n_w)], axis=1)  # z_up x f_h
+    p = np.ascontiguousarray(p_WWo, dtype=np.float64).reshape(-1, 3)
+    a = np.ascontiguousarray(axle_W, dtype=np.float64).reshape(-1, 3)
     U, Wc, pinv = _pattern(sampling, radius_m, width_m)
-    xs = p[:, 0:1] + U[None, :] * f_h[:, 0:1] + Wc[None, :] * s_h[:, 0:1]
-    ys = p[:, 1:2] + U[None, :] * f_h[:, 1:2] + Wc[None, :] * s_h[:, 1:2]
+    f_h, s_h, xs, ys = _footprint_points(p, a, U, Wc)
     zt, ok = _safe_heights(heightfield, xs, ys)
-    rim = p[:, 2:3] - np.sqrt(np.maximum(radius_m**2 - U[None, :] ** 2, 0.0))
-    off = ~ok.all(axis=1)
-    pen = np.where(ok, zt - rim, -np.inf)
-    sinkage = pen.max(axis=1)
-    # Plane z = c0 + cu u + cw w over the footprint (local horizontal axes f_h, s_h).
-    coef = np.where(off[:, None], 0.0, np.where(ok, zt, 0.0)) @ pinv.T  # (n, 3)
-    cu, cw = coef[:, 1], coef[:, 2]
-    n_W = _unit(
-        np.stack(
-            [
-                -cu * f_h[:, 0] - cw * s_h[:, 0],
-                -cu * f_h[:, 1] - cw * s_h[:, 1],
-                np.ones(n_w),
-            ],
-            axis=1,
-        )
+    sinkage, n_W, forward, lateral, p_WC, off = _footprint_plane(
+        p, a, f_h, s_h, U, zt, ok, pinv, float(radius_m)
     )
-    forward = _unit(_cross(a, n_W))
-    lateral = _cross(n_W, forward)
-    p_WC = p - radius_m * n_W
     return WheelContactGeometry(
         sinkage=sinkage,
         n_W=n_W,
@@ -169,6 +123,76 @@ def wheel_contact_geometry(
         p_WC=p_WC,
         off_terrain=off,
     )
+
+
+@numba.njit(cache=True)
+def _unit3(x, y, z):  # pragma: no cover - numba
+    n = max(np.sqrt(x * x + y * y + z * z), 1e-12)
+    return x / n, y / n, z / n
+
+
+@numba.njit(cache=True)
+def _footprint_points(p, a, U, Wc):  # pragma: no cover - numba
+    """Horizontal rolling (``f_h = a x z_up``) and side (``s_h = z_up x f_h``) directions
+    (n, 3) of wheels with axles ``a`` (n, 3), and their footprint sample points
+    ``xs, ys`` (n, k) (m) at offsets ``U`` along and ``Wc`` across the tread (k,)."""
+    n = p.shape[0]
+    k = U.size
+    f_h = np.zeros((n, 3))
+    s_h = np.zeros((n, 3))
+    xs = np.empty((n, k))
+    ys = np.empty((n, k))
+    for i in range(n):
+        ax, ay, _ = _unit3(a[i, 0], a[i, 1], a[i, 2])
+        fx, fy, _ = _unit3(ay, -ax, 0.0)  # robust when the axle is tilted
+        f_h[i, 0], f_h[i, 1] = fx, fy
+        s_h[i, 0], s_h[i, 1] = -fy, fx
+        for j in range(k):
+            xs[i, j] = p[i, 0] + U[j] * fx - Wc[j] * fy
+            ys[i, j] = p[i, 1] + U[j] * fy + Wc[j] * fx
+    return f_h, s_h, xs, ys
+
+
+@numba.njit(cache=True)
+def _footprint_plane(p, a, f_h, s_h, U, zt, ok, pinv, radius):  # pragma: no cover - numba
+    """Sinkage, the least-squares plane's normal, the rolling and lateral directions, the
+    contact point and the off-terrain flag of each wheel from its footprint heights
+    ``zt`` (n, k) (m; ``ok`` False where off the raster or on nodata)."""
+    n, k = zt.shape
+    sinkage = np.empty(n)
+    n_W = np.empty((n, 3))
+    forward = np.empty((n, 3))
+    lateral = np.empty((n, 3))
+    p_WC = np.empty((n, 3))
+    off = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        deepest = -np.inf
+        c1 = 0.0
+        c2 = 0.0
+        for j in range(k):
+            if not ok[i, j]:
+                off[i] = True
+        for j in range(k):
+            if ok[i, j]:
+                rim = p[i, 2] - np.sqrt(max(radius * radius - U[j] * U[j], 0.0))
+                deepest = max(deepest, zt[i, j] - rim)
+                if not off[i]:
+                    # Plane z = c0 + cu u + cw w over the footprint (axes f_h, s_h).
+                    c1 += pinv[1, j] * zt[i, j]
+                    c2 += pinv[2, j] * zt[i, j]
+        sinkage[i] = deepest
+        nx, ny, nz = _unit3(-c1 * f_h[i, 0] - c2 * s_h[i, 0], -c1 * f_h[i, 1] - c2 * s_h[i, 1], 1.0)
+        ax, ay, az = a[i, 0], a[i, 1], a[i, 2]
+        fx, fy, fz = _unit3(ay * nz - az * ny, az * nx - ax * nz, ax * ny - ay * nx)
+        n_W[i, 0], n_W[i, 1], n_W[i, 2] = nx, ny, nz
+        forward[i, 0], forward[i, 1], forward[i, 2] = fx, fy, fz
+        lateral[i, 0] = ny * fz - nz * fy
+        lateral[i, 1] = nz * fx - nx * fz
+        lateral[i, 2] = nx * fy - ny * fx
+        p_WC[i, 0] = p[i, 0] - radius * nx
+        p_WC[i, 1] = p[i, 1] - radius * ny
+        p_WC[i, 2] = p[i, 2] - radius * nz
+    return sinkage, n_W, forward, lateral, p_WC, off
 
 
 _PATTERNS: dict = {}

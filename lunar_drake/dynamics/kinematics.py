@@ -418,7 +418,11 @@ def explicit_steer_twist(delta, omega, *, geometry: WheelGeometry) -> np.ndarray
     side = np.stack([-s, c, s * cy + c * cx], axis=-1)
     a = np.concatenate([roll, side], axis=-2)  # (..., 2n, 3)
     b = np.concatenate([w * g.wheel_radius, np.zeros_like(w)], axis=-1)  # (..., 2n)
-    return np.einsum("...ij,...j->...i", np.linalg.pinv(a), b)
+    # Normal equations (A^T A is 3 x 3 and well conditioned for any rover with wheels
+    # on both sides of its centre): the least-squares solution, as pinv but ~10x faster.
+    ata = np.einsum("...ki,...kj->...ij", a, a)
+    atb = np.einsum("...ki,...k->...i", a, b)
+    return np.linalg.solve(ata, atb[..., None])[..., 0]
 
 
 # --------------------------------------------------------------------------------- servos

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from lunar_drake.rng import sample_generator, stream_key
+from lunar_drake.rng import SampleStream, stream_key
 from lunar_drake.sensors.sampling import (
     check_sampling,
     delivered_index,
@@ -45,6 +45,7 @@ class SampledSensor(LeafSystem):
         check_sampling(rate_hz, delay_s)
         self.set_name(name)
         self._key = stream_key(seed, name)
+        self._stream = SampleStream(self._key)  # scratch, re-keyed per sample
         self._rate = float(rate_hz)
         self._delay = float(delay_s)
         initial = np.asarray(initial, dtype=np.float64).ravel()
@@ -80,9 +81,7 @@ class SampledSensor(LeafSystem):
 
     def _on_sample(self, context, discrete_state):
         k = sample_index(context.get_time(), self._rate)
-        value = np.asarray(
-            self.sample(context, sample_generator(self._key, k), discrete_state), np.float64
-        )
+        value = np.asarray(self.sample(context, self._stream.at(k), discrete_state), np.float64)
         if self._depth == 1:
             discrete_state.set_value(self._samples, value)
         else:

@@ -22,8 +22,8 @@ from pydrake.systems.framework import (
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import (
     FootprintSampling,
-    _cross,
     belly_penetration,
+    cross_rows,
     wheel_contact_geometry,
 )
 from lunar_drake.terrain.heightfield import Heightfield
@@ -174,6 +174,12 @@ class WheelRegolithContact(LeafSystem):
             raise TypeError(f"patch must be a ShearPatchParams, got {type(patch).__name__}")
         self._wheel_index_objs = [BodyIndex(int(b)) for b in wheel_bodies]
         self._belly_obj = None if belly_body is None else BodyIndex(int(belly_body))
+        self._force_buffer = []
+        for b in self._wheel_index_objs + ([self._belly_obj] if self._belly_obj else []):
+            e = ExternallyAppliedSpatialForce()
+            e.body_index = b
+            e.p_BoBq_B = np.zeros(3)
+            self._force_buffer.append(e)
         n = len(self._wheels)
         self._n = n
         self._soil_index = self.DeclareAbstractParameter(AbstractValue.Make(soil))
@@ -375,7 +381,7 @@ class WheelRegolithContact(LeafSystem):
             )
             # The patch force acts at the rim: its moment about the axle is the lever arm's.
             Fs = fs[:, :1] * k.forward_W + fs[:, 1:] * k.lateral_W
-            m_static = np.einsum("ij,ij->i", _cross(k.r_c, Fs), k.axle)
+            m_static = np.einsum("ij,ij->i", cross_rows(k.r_c, Fs), k.axle)
             wd = 1.0 - ws
             fx = ws * fs[:, 0] + wd * fx
             fy = ws * fs[:, 1] + wd * fy
@@ -385,7 +391,7 @@ class WheelRegolithContact(LeafSystem):
         F *= on[:, None]
         # Moment about the centre of F at the contact point, corrected so its axle
         # component is the soil moment (Wong-Reece: -torque) rather than the lever arm.
-        M = _cross(k.r_c, F)
+        M = cross_rows(k.r_c, F)
         m_axle = np.einsum("ij,ij->i", M, k.axle)
         tau = M + ((m_soil * on) - m_axle)[:, None] * k.axle
         state = k.state.copy()
@@ -411,20 +417,15 @@ class WheelRegolithContact(LeafSystem):
 
     def _calc_forces(self, context, output):
         c = self._cached(context)
-        forces = []
-        for k, b in enumerate(self._wheel_index_objs):
-            e = ExternallyAppliedSpatialForce()
-            e.body_index = b
-            e.p_BoBq_B = np.zeros(3)
+        # The ExternallyAppliedSpatialForce objects are scratch: set_value copies them.
+        forces = self._force_buffer
+        for k, e in enumerate(forces[: self._n]):
             # Applied at the centre: the force plus its moment about the centre.
             e.F_Bq_W = SpatialForce(c.tau[k], c.F[k])
-            forces.append(e)
-        if c.belly is not None:
-            e = ExternallyAppliedSpatialForce()
-            e.body_index = self._belly_obj
-            e.p_BoBq_B = np.zeros(3)
-            e.F_Bq_W = SpatialForce(c.belly[1], c.belly[0])
-            forces.append(e)
+        if c.belly is None:
+            output.set_value(forces[: self._n])
+            return
+        forces[-1].F_Bq_W = SpatialForce(c.belly[1], c.belly[0])
         output.set_value(forces)
 
     def _calc_wheel_state(self, context, output):

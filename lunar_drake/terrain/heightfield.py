@@ -30,6 +30,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from rasterio.coords import BoundingBox
 from rasterio.errors import RasterioError
@@ -163,6 +164,43 @@ class BlockCacheInfo:
     hits: int
     misses: int
     pixels_read: int
+
+
+@numba.njit(cache=True)
+def _heights_within(z, xs, ys, res, left, right, bottom, top):  # pragma: no cover - numba
+    """Bilinear heights (float64) at points inside ``[left, right] x [bottom, top]`` (m)
+    of the in-memory raster ``z``; -inf and ok False outside it or on nodata. The same
+    operations, in the same order, as :meth:`Heightfield.height` (same bits)."""
+    nrows, ncols = z.shape
+    n = xs.size
+    out = np.full(n, -np.inf)
+    ok = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        x = xs[i]
+        y = ys[i]
+        if not (x >= left and x <= right and y >= bottom and y <= top):  # NaN fails too
+            continue
+        col = x / res + 0.5 * ncols - 0.5
+        row = 0.5 * nrows - 0.5 - y / res
+        row = min(max(row, 0.0), nrows - 1.0)
+        col = min(max(col, 0.0), ncols - 1.0)
+        r0 = min(int(np.floor(row)), max(nrows - 2, 0))
+        c0 = min(int(np.floor(col)), max(ncols - 2, 0))
+        fr = row - r0
+        fc = col - c0
+        r1 = min(r0 + 1, nrows - 1)
+        c1 = min(c0 + 1, ncols - 1)
+        v0 = np.float64(z[r0, c0])
+        v1 = np.float64(z[r0, c1])
+        v2 = np.float64(z[r1, c0])
+        v3 = np.float64(z[r1, c1])
+        t = v0 + fc * (v1 - v0)
+        b = v2 + fc * (v3 - v2)
+        h = t + fr * (b - t)
+        if h == h:
+            out[i] = h
+            ok[i] = True
+    return out, ok
 
 
 class _ArraySource:
@@ -560,6 +598,38 @@ class Heightfield:
         if np.isnan(z).any():
             raise self._nodata_error("height", xf, yf, z)
         return z.reshape(shape)[()]
+
+    def heights_within(self, x, y, *, margin_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Heights (m) and an ``ok`` mask at site points (m) for the contact's hot loop:
+        like :meth:`height` (same values), but points off the raster by less than
+        ``margin_m`` inside its edge, non-finite points and points touching nodata get
+        ``ok`` False and height -inf instead of an error. Compiled for in-memory rasters."""
+        xx, yy = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
+        b = self.bounds
+        lo_x, hi_x, lo_y, hi_y = (
+            b.left + margin_m,
+            b.right - margin_m,
+            b.bottom + margin_m,
+            b.top - margin_m,
+        )
+        if isinstance(self._src, _ArraySource):
+            z, ok = _heights_within(
+                self._src.z, xx.ravel(), yy.ravel(), self.resolution_m, lo_x, hi_x, lo_y, hi_y
+            )
+            return z.reshape(xx.shape), ok.reshape(xx.shape)
+        ok = (xx >= lo_x) & (xx <= hi_x) & (yy >= lo_y) & (yy <= hi_y)
+        z = np.full(xx.shape, -np.inf)
+        if ok.all():
+            try:
+                return self.height(xx, yy), ok
+            except NoDataError:
+                pass
+        for k in np.flatnonzero(ok.ravel()):
+            try:
+                z.ravel()[k] = self.height(xx.ravel()[k : k + 1], yy.ravel()[k : k + 1])[0]
+            except (NoDataError, OutOfBoundsError):
+                ok.ravel()[k] = False
+        return z, ok
 
     def gradient(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """``(dz/dx, dz/dy)`` (m/m, x east, y north) at site points (m).
