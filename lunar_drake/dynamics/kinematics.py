@@ -389,7 +389,7 @@ def explicit_steer_commands(
             "pass clip=True to saturate instead"
         )
     needed = delta
-    delta = np.clip(delta, -lim, lim)
+    delta = np.minimum(np.maximum(delta, -lim), lim)
     c, s = np.cos(delta), np.sin(delta)
     omega = (vpx * c + vpy * s - wz[..., None] * g.steering_offset) / g.wheel_radius
     return SteerCommands(delta=delta, omega=omega, saturated=over, needed_delta=needed)

@@ -488,7 +488,7 @@ def compaction_resistance(z, *, wheel: WheelParams, soil: SoilParams) -> np.ndar
 
 def entry_angle(z, *, wheel: WheelParams) -> np.ndarray:
     """Contact entry angle theta_1 = arccos(1 - z/r) (rad), with z clipped to [0, r]."""
-    zc = np.clip(np.asarray(z, dtype=np.float64), 0.0, wheel.radius_m)
+    zc = np.minimum(np.maximum(np.asarray(z, dtype=np.float64), 0.0), wheel.radius_m)
     return np.arccos(1.0 - zc / wheel.radius_m)
 
 

@@ -291,7 +291,7 @@ class WheelRegolithContact(LeafSystem):
             sampling=self._sampling,
         )
         on = ~g.off_terrain
-        z = np.where(on, np.clip(g.sinkage, -1.0, w.radius_m), -1.0)
+        z = np.where(on, np.minimum(np.maximum(g.sinkage, -1.0), w.radius_m), -1.0)
         v_x = np.einsum("ij,ij->i", v, g.forward_W)
         v_y = np.einsum("ij,ij->i", v, g.lateral_W)
         z_dot = -np.einsum("ij,ij->i", v, g.n_W)
