@@ -289,6 +289,43 @@ def test_plane_is_exact_in_memory_and_from_file(tmp_path):
             assert isinstance(hf.height(0.1, 0.2), float | np.floating)
 
 
+def test_heights_within_matches_height_and_flags_edges_and_nodata(tmp_path):
+    """The contact's compiled query gives height()'s exact bits inside, and -inf with ok
+    False off the raster (less a margin), on non-finite points and next to nodata; the
+    file-backed path agrees with the in-memory one."""
+    rng = np.random.default_rng(11)
+    z = rng.normal(size=(40, 50)).astype(np.float32)
+    z[20, 30] = np.nan
+    mem = Heightfield.from_array(z, resolution_m=0.1)
+    mem.to_geotiff(tmp_path / "z.tif")
+    x = rng.uniform(-2.6, 2.6, size=(9, 40))
+    y = rng.uniform(-2.1, 2.1, size=(9, 40))
+    x[0, :3] = [np.nan, np.inf, 0.0]
+    y[0, :3] = [0.0, 0.0, -np.inf]
+    x[1, 0], y[1, 0] = (30 + 0.5 - 25) * 0.1 - 0.05, (20 - 20 + 0.5) * 0.1 - 0.05
+    margin = 0.1
+    with Heightfield.open(tmp_path / "z.tif", block_size=16) as fil:
+        for hf in (mem, fil):
+            got, ok = hf.heights_within(x, y, margin_m=margin)
+            b = mem.bounds
+            inside = (
+                (x >= b.left + margin)
+                & (x <= b.right - margin)
+                & (y >= b.bottom + margin)
+                & (y <= b.top - margin)
+            )
+            assert not ok[0, :3].any() and not ok[1, 0] and inside[1, 0]
+            for i, j in zip(*np.nonzero(inside), strict=True):
+                try:
+                    want = mem.height(x[i, j], y[i, j])
+                except NoDataError:
+                    assert not ok[i, j] and got[i, j] == -np.inf
+                    continue
+                assert ok[i, j] and got[i, j] == want  # the same bits
+            assert not ok[~inside].any() and np.all(got[~inside] == -np.inf)
+            assert ok.sum() > 0.5 * ok.size
+
+
 def test_bilinear_central_differences_and_edge_clamp():
     rng = np.random.default_rng(4)
     z = rng.normal(size=(9, 12))

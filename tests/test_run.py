@@ -146,22 +146,27 @@ def test_a_folder_of_other_files_is_never_replaced(cache, tmp_path, capsys):
     assert (keep / "precious.txt").read_text() == "keep me"
 
 
-def test_meshcat_listens_on_localhost_by_default(cache, tmp_path, capsys):
+@pytest.mark.parametrize(
+    ("extra", "ip"), [([], "127.0.0.1"), (["--meshcat-host", "127.0.0.2"], "127.0.0.2")]
+)
+def test_meshcat_listens_on_localhost_by_default(cache, tmp_path, capsys, extra, ip):
+    """Meshcat binds 127.0.0.1 unless --meshcat-host says otherwise (here another
+    loopback address, so the test never opens a port to the network)."""
     import psutil
 
     assert build_parser().parse_args(["run"]).meshcat_host == "127.0.0.1"
     out = tmp_path / "run"
     args = ["run", "--scenario", "small", "--duration", "0.1", "--no-progress", "--out", str(out)]
     before = {c.laddr for c in psutil.Process().net_connections(kind="tcp")}
-    assert main(args) == 0
+    assert main([*args, *extra]) == 0
     printed = capsys.readouterr().out
-    assert "Meshcat: http://127.0.0.1:" in printed
+    assert f"Meshcat: http://{ip}:" in printed
     listening = [
         c
         for c in psutil.Process().net_connections(kind="tcp")
         if c.status == psutil.CONN_LISTEN and c.laddr not in before
     ]
-    assert listening and all(c.laddr.ip == "127.0.0.1" for c in listening)
+    assert listening and all(c.laddr.ip == ip for c in listening)
     assert (out / "meshcat.html").stat().st_size > 10_000
 
 
@@ -201,3 +206,22 @@ def test_parked_rover_holds_on_a_side_slope(cache):
         assert parked is not None and parked["duration_s"] > 15.0
         assert parked["drift_m"] < 0.01, (rover, parked)
         assert abs(parked["yaw_change_deg"]) < 0.5, (rover, parked)
+
+
+def test_a_run_that_hits_nodata_leaves_no_directory(cache, tmp_path, capsys):
+    """A DEM with a nodata hole under the spawn point: NoDataError, one line, exit 2, and
+    neither the run directory nor the parents the run would have made are left."""
+    from lunar_drake.terrain.heightfield import Heightfield
+
+    z = np.zeros((200, 200), np.float32)
+    z[80:120, 80:120] = np.nan
+    dem = tmp_path / "holes.tif"
+    Heightfield.from_array(z, resolution_m=0.1).to_geotiff(dem)
+    out = tmp_path / "new" / "run"
+    text = "{terrain: {dem: " + str(dem) + "}, sensors: {camera: {enabled: false}}}"
+    args = [*RUN, "--scenario", "small", "--duration", "0.1", "--scenario-text", text]
+    assert main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "NoDataError" in err and "nodata" in err
+    assert not (tmp_path / "new").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["holes.tif"]

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from lunar_drake.errors import ConfigError, OutOfRangeError, check_range
+from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
@@ -76,6 +76,9 @@ class CameraConfig:
             the heightfield engine then uses 4096).
         dem_max_px: the heightfield engine's DEM is decimated to at most this many
             pixels a side.
+        sensor: the image sensor and optics: full well, read noise, ADC, QE, dark
+            current, f-number (:class:`~lunar_drake.render.sensor.SensorParams`; default
+            the CMV4000-class navigation camera).
     """
 
     enabled: bool = False
@@ -96,6 +99,7 @@ class CameraConfig:
     limb_blend_deg: list[float] = dc.field(default_factory=lambda: [84.0, 89.0])
     normal_map_max_px: int = 4096
     dem_max_px: int = 8192
+    sensor: sensor_mod.SensorParams = dc.field(default_factory=sensor_mod.SensorParams)
 
     def __post_init__(self):
         self.validate()
@@ -128,6 +132,11 @@ class CameraConfig:
             )
         check_range("normal_map_max_px", self.normal_map_max_px, 0, 65536, unit=" px")
         check_range("dem_max_px", self.dem_max_px, 64, 65536, unit=" px")
+
+        try:
+            self.sensor.validate()
+        except LunarDrakeError as exc:
+            raise type(exc)(f"sensor.{exc}") from None
 
     def pinhole(self) -> PinholeCamera:
         return PinholeCamera.from_fov(
@@ -164,7 +173,6 @@ class TerrainCameraRenderer:
         heightfield: the site terrain. albedo: normal-albedo grid covering the site (any
             resolution) or None (0.15 everywhere).
         model: CameraConfig (optics, sensor settings, engine). hapke: HapkeParams.
-        sensor: SensorParams.
         dynamic_meshes: the rover's meshes (DynamicMesh, in their geometry frames).
     """
 
@@ -175,14 +183,13 @@ class TerrainCameraRenderer:
         albedo=None,
         model: CameraConfig | None = None,
         hapke: hapke_mod.HapkeParams = hapke_mod.HIGHLANDS_643NM,
-        sensor: sensor_mod.SensorParams = sensor_mod.CMV4000_NAVCAM,
         dynamic_meshes=(),
     ):
         model = CameraConfig() if model is None else model
         model.validate()
         self.heightfield = heightfield
         self.model = model
-        self.sensor = sensor
+        self.sensor = model.sensor
         self._albedo = (
             None
             if albedo is None

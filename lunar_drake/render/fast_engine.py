@@ -49,7 +49,7 @@ from lunar_drake.render.shading import (
     RasterSampler,
     ShadedImage,
     ShadingConfig,
-    _add_spot,
+    add_spotlight,
     fill_direction,
     rover_shadow_factor,
     shade,
@@ -579,9 +579,9 @@ class FastTerrainEngine:
         gb = _compact_gbuffer(camera, idx, pos, nrm, -d, hits, dynamic=False)
         n_b = nrm
         if track_depth is not None:
-            from lunar_drake.render.shading import _bumped
+            from lunar_drake.render.shading import bumped_normals
 
-            n_b = _bumped(gb, track_depth, self.config.bump_step_m)
+            n_b = bumped_normals(gb, track_depth, self.config.bump_step_m)
         v = gb.view
         cos_e = np.maximum((n_b * v).sum(axis=0), 0.0).astype(np.float32)
         afac = (
@@ -600,7 +600,7 @@ class FastTerrainEngine:
 
         total = np.zeros(m, np.float32)
         for spot in il.spotlights:
-            _add_spot(total, gb, n_b, v, spot, radiance_term, raycaster, self.config)
+            add_spotlight(total, gb, n_b, v, spot, radiance_term, raycaster, self.config)
         rad[idx] += total * np.float32(math.pi)
 
     @classmethod

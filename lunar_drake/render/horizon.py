@@ -426,7 +426,7 @@ class HorizonMask:
         return t[np.ix_(ri, ci)]
 
 
-def _bilinear(z: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+def bilinear_rows(z: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
     """Bilinear heights at fractional (row, col); NaN outside ``[0, n-1]``."""
     nr, nc = z.shape
     inside = (row >= 0) & (row <= nr - 1) & (col >= 0) & (col <= nc - 1)
@@ -482,7 +482,7 @@ def horizon_profile(
     nr, nc = zz.shape
     prow = nr / 2 - 0.5 - pts[:, 1] / res
     pcol = pts[:, 0] / res + nc / 2 - 0.5
-    z0 = _bilinear(zz, prow, pcol)
+    z0 = bilinear_rows(zz, prow, pcol)
     if np.isnan(z0).any():
         i = int(np.flatnonzero(np.isnan(z0))[0])
         raise OutOfRangeError(f"points_xy[{i}] = {tuple(pts[i])} m is outside the DEM or on nodata")
@@ -495,7 +495,7 @@ def horizon_profile(
     for i in range(pts.shape[0]):
         rows = prow[i] + dr[:, None] * d[None, :] / res
         cols = pcol[i] + dc[:, None] * d[None, :] / res
-        h = _bilinear(zz, rows, cols)
+        h = bilinear_rows(zz, rows, cols)
         ang = (h - z0[i] - d * d / (2.0 * moon_radius_m)) / d
         best = np.fmax.reduce(ang, axis=1)
         ok = ~np.isnan(best)
@@ -959,7 +959,7 @@ def _near_field(zc, *, R0, C0, recv, band: _Band) -> np.ndarray:
 # ----------------------------------------------------------------------------------------
 # Grid sources and tiling
 # ----------------------------------------------------------------------------------------
-def _as_grid(dem, resolution_m):
+def as_grid(dem, resolution_m):
     """``(source, shape, resolution, reader)``: reader(r0, c0, nr, nc) -> float array."""
     from lunar_drake.terrain.heightfield import Heightfield
 
@@ -992,7 +992,7 @@ def _as_grid(dem, resolution_m):
     return z, z.shape, res, read
 
 
-def _height_range(src) -> tuple[float, float]:
+def height_range(src) -> tuple[float, float]:
     """``(min, max)`` height (m) of the whole DEM (a file is scanned once, by windows)."""
     from lunar_drake.terrain.heightfield import Heightfield
 
@@ -1088,7 +1088,7 @@ def horizon_angles(
     Returns:
         float32 ``(rows, cols)`` elevations (rad); NaN on nodata.
     """
-    src, shape, res, read = _as_grid(dem, resolution_m)
+    src, shape, res, read = as_grid(dem, resolution_m)
     lo, hi = (float(v) for v in elevation_range_deg)
     if not (-89.0 < lo < hi < 89.0):
         raise OutOfRangeError(
@@ -1102,7 +1102,7 @@ def horizon_angles(
     plan = band_plan(
         shape,
         res,
-        _height_range(src),
+        height_range(src),
         azimuth_deg=_check_azimuth(azimuth_deg) % 360.0,
         tan_lo=t_lo,
         tan_hi=t_hi,

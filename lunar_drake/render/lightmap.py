@@ -57,10 +57,10 @@ from lunar_drake.render.horizon import (
     MOON_RADIUS_M,
     HorizonField,
     HorizonMask,
-    _as_grid,
-    _bilinear,
-    _height_range,
+    as_grid,
     band_plan,
+    bilinear_rows,
+    height_range,
     tiled_dask,
 )
 
@@ -361,7 +361,7 @@ def lightmap_dask(
     is larger than one tile -- e.g. to stream it into a
     :class:`~lunar_drake.terrain.geotiff.GeoTiffWriter` with ``dask.array.store`` -- and
     the computed numpy array otherwise."""
-    src, shape, res, read = _as_grid(dem, resolution_m)
+    src, shape, res, read = as_grid(dem, resolution_m)
     az, el = _check_sun(sun_azimuth_deg, sun_elevation_deg)
     r = _check_disk(sun_radius_deg, limb, limb_darkening_u)
     mask = _check_mask(horizon_mask)
@@ -380,7 +380,7 @@ def lightmap_dask(
     plan = band_plan(
         shape,
         res,
-        _height_range(src),
+        height_range(src),
         azimuth_deg=az,
         tan_lo=math.tan(max(-cap, e - r - dmax)),  # the Sun's disk at every cell
         tan_hi=math.tan(min(cap, e + r + dmax)),
@@ -643,7 +643,7 @@ def lightmap_bruteforce(
 
     def excess(s, r0, c0, h0, kk, tk):
         """Terrain height above the rays at distance ``s`` px (NaN outside the grid)."""
-        h = _bilinear(zz, r0 + drow[kk] * s, c0 + dcol[kk] * s)
+        h = bilinear_rows(zz, r0 + drow[kk] * s, c0 + dcol[kk] * s)
         return h - (h0 + s * res * tk + s * s * k2)
 
     out = np.zeros(rows.size)

@@ -44,7 +44,7 @@ arguments), so a frame is reproducible on one platform; across C libraries a pix
 a mean below :data:`POISSON_EXACT_BELOW` may in rare cases differ by one electron.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
 
 import math
 import threading
@@ -55,7 +55,7 @@ import numba
 import numpy as np
 
 from lunar_drake import rng
-from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError, format_value
 
 H_PLANCK = 6.62607015e-34
 """Planck constant (J s, exact SI)."""
@@ -68,7 +68,7 @@ POISSON_EXACT_BELOW = 20.0
 _SHOT, _READ = 0, 1
 
 
-@dataclass(frozen=True)
+@dataclass
 class SensorParams:
     """Camera sensor and optics (a CMV4000-class global-shutter CMOS, values from memory).
 
@@ -119,10 +119,14 @@ class SensorParams:
     msb_aligned: bool = False
 
     def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
         _positive("full_well_e", self.full_well_e)
         _nonneg("read_noise_e", self.read_noise_e)
         if not isinstance(self.adc_bits, int) or not 8 <= self.adc_bits <= 16:
-            raise OutOfRangeError(f"adc_bits={self.adc_bits!r} must be an integer in [8, 16]")
+            raise OutOfRangeError(f"adc_bits = {self.adc_bits!r} must be an integer in [8, 16]")
         if self.gain_e_per_dn is not None:
             _positive("gain_e_per_dn", self.gain_e_per_dn)
         _unit("quantum_efficiency", self.quantum_efficiency)
@@ -136,14 +140,14 @@ class SensorParams:
             0 <= self.black_level_dn < (1 << self.adc_bits)
         ):
             raise OutOfRangeError(
-                f"black_level_dn={self.black_level_dn!r} must be an integer in "
+                f"black_level_dn = {self.black_level_dn!r} must be an integer in "
                 f"[0, {(1 << self.adc_bits) - 1}]"
             )
         _positive("min_exposure_s", self.min_exposure_s)
         if not self.max_exposure_s >= self.min_exposure_s:
             raise OutOfRangeError(
-                f"max_exposure_s={self.max_exposure_s!r} must be >= min_exposure_s="
-                f"{self.min_exposure_s!r}"
+                f"max_exposure_s = {format_value(self.max_exposure_s)} must be >= "
+                f"min_exposure_s = {format_value(self.min_exposure_s)}"
             )
         _positive("max_gain", self.max_gain)
 
@@ -170,17 +174,17 @@ class SensorParams:
 
 def _positive(name: str, v) -> None:
     if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-        raise OutOfRangeError(f"{name}={v!r} must be a finite number > 0")
+        raise OutOfRangeError(f"{name} = {format_value(v)} must be a finite number > 0")
 
 
 def _nonneg(name: str, v) -> None:
     if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-        raise OutOfRangeError(f"{name}={v!r} must be a finite number >= 0")
+        raise OutOfRangeError(f"{name} = {format_value(v)} must be a finite number >= 0")
 
 
 def _unit(name: str, v) -> None:
     if not (isinstance(v, (int, float)) and 0 < v <= 1):
-        raise OutOfRangeError(f"{name}={v!r} must lie in (0, 1]")
+        raise OutOfRangeError(f"{name} = {format_value(v)} must lie in (0, 1]")
 
 
 CMV4000_NAVCAM = SensorParams()

@@ -712,7 +712,7 @@ def _phase(cos_g: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------------
 # Shading
 # ----------------------------------------------------------------------------------------
-def _bumped(gb: GBuffer, track_depth, step: float) -> np.ndarray:
+def bumped_normals(gb: GBuffer, track_depth, step: float) -> np.ndarray:
     n = gb.normal
     sel = np.flatnonzero(gb.terrain & (n[2] > 1e-3))
     if sel.size == 0:
@@ -770,7 +770,11 @@ def shade(
     rad = np.zeros(gb.width * gb.height, dtype=np.float32)
     if m == 0:
         return ShadedImage(rad.reshape(gb.height, gb.width), gb.depth, gb.label)
-    n = _bumped(gb, track_depth, config.bump_step_m) if track_depth is not None else gb.normal
+    n = (
+        bumped_normals(gb, track_depth, config.bump_step_m)
+        if track_depth is not None
+        else gb.normal
+    )
     v = gb.view
     x, y = gb.position[0], gb.position[1]
     cos_e = _dot3(n, v)
@@ -853,7 +857,7 @@ def shade(
         _add_directional(total, n, v, edir, il.earth_irradiance, radiance_term, secondary_brdf)
 
     for spot in il.spotlights:
-        _add_spot(total, gb, n, v, spot, radiance_term, raycaster, config)
+        add_spotlight(total, gb, n, v, spot, radiance_term, raycaster, config)
 
     total *= np.float32(math.pi)
     rad[gb.index] = total
@@ -870,7 +874,7 @@ def _add_directional(total, n, v, ldir, irradiance: float, radiance_term, fn=Non
     total += term
 
 
-def _add_spot(total, gb: GBuffer, n, v, spot: SpotLight, radiance_term, raycaster, config):
+def add_spotlight(total, gb: GBuffer, n, v, spot: SpotLight, radiance_term, raycaster, config):
     if spot.intensity == 0.0:
         return
     m = total.size
