@@ -1,4 +1,4 @@
-"""Pure functions from a simulation's logs to its summary (no Drake, no files).
+"""Pure functions from a simulation's logs (numpy arrays) to its summary (no files).
 
 Every number is rounded to a fixed number of decimals, so ``summary.json`` is
 byte-identical for the same scenario and seed.
