@@ -112,18 +112,7 @@ def deliver(
     for d in due:
         m = d.message
         delivered[m.topic] = (*delivered.get(m.topic, ()), d)[-history:]
-        ledger = ledger.append(
-            LinkRecord(
-                direction=direction,
-                channel=channel,
-                topic=m.topic,
-                seq=m.seq,
-                bytes=m.size_bytes,
-                t_sent=m.t_sent_s,
-                t_received=d.t_received_s,
-                dropped=False,
-            )
-        )
+        ledger = ledger.append(_record(m, d.t_received_s, direction, channel))
     rest = tuple(d for d in state.in_flight if not _due(d, now_s))
     return dc.replace(state, in_flight=rest, delivered=delivered, ledger=ledger)
 
@@ -141,21 +130,22 @@ def records(state: LinkState, now_s: float, *, direction: str, channel: str) -> 
     still in flight (``t_received`` NaN)."""
     state = deliver(state, now_s, direction=direction, channel=channel, history=1)
     rows = state.ledger.items()
-    for d in state.in_flight:
-        m = d.message
-        rows.append(
-            LinkRecord(
-                direction=direction,
-                channel=channel,
-                topic=m.topic,
-                seq=m.seq,
-                bytes=m.size_bytes,
-                t_sent=m.t_sent_s,
-                t_received=math.nan,
-                dropped=False,
-            )
-        )
+    rows.extend(_record(d.message, math.nan, direction, channel) for d in state.in_flight)
     return rows
+
+
+def _record(m, t_received: float, direction: str, channel: str) -> LinkRecord:
+    """The ledger row of message ``m`` received at ``t_received`` (s; NaN: in flight)."""
+    return LinkRecord(
+        direction=direction,
+        channel=channel,
+        topic=m.topic,
+        seq=m.seq,
+        bytes=m.size_bytes,
+        t_sent=m.t_sent_s,
+        t_received=t_received,
+        dropped=False,
+    )
 
 
 __all__ = [
