@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import dataclasses as dc
 import re
+import signal
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -209,15 +211,20 @@ def simulate(
     simulator.set_monitor(monitor)
     if meshcat is not None:
         meshcat.StartRecording(set_visualizations_while_recording=True)
+    interrupted = _InterruptFlag()
     try:
-        simulator.Initialize()
         t_built = time.perf_counter()
         clock["wall0"] = t_built - 1e-9
         try:
+            simulator.Initialize()
             simulator.AdvanceTo(end)
         except (KeyboardInterrupt, SimulationError):
             raise
         except Exception as exc:  # Drake raises RuntimeError on integrator failures.
+            if interrupted.seen:
+                # Ctrl-C inside a system's Python callback reaches us through C++ as a
+                # RuntimeError ("initialization failed", ...): it is still an interrupt.
+                raise KeyboardInterrupt from None
             raise SimulationError(
                 f"simulation failed at t = {root.get_time():.3f} s: " + " ".join(str(exc).split())
             ) from exc
@@ -225,6 +232,7 @@ def simulate(
         if bar is not None:
             _update_bar(bar, root.get_time(), t_sim - t_built)
     finally:
+        interrupted.restore()
         if bar is not None:
             bar.close()
     if meshcat is not None:
@@ -288,3 +296,25 @@ def _update_bar(bar, t: float, wall_s: float) -> None:
     if wall_s > 0:
         bar.set_postfix_str(f"{t / wall_s:.1f}x real time", refresh=False)
     bar.refresh()
+
+
+class _InterruptFlag:
+    """Records SIGINT while a simulation runs (main thread only) and raises
+    KeyboardInterrupt as Python's default handler does; ``restore()`` puts the previous
+    handler back."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._installed = threading.current_thread() is threading.main_thread()
+        if self._installed:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+
+    def _handle(self, signum, frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        if self._installed:
+            previous = self._previous
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+            self._installed = False

@@ -16,6 +16,7 @@ import pytest
 
 from lunar_drake.cli import build_parser, main
 from lunar_drake.outputs import LOG_FILES
+from lunar_drake.scenario_files import apply_overrides
 
 RUN = ["run", "--no-meshcat", "--no-progress"]
 LOGS = [*LOG_FILES.values(), "telemetry.csv", "link.csv"]
@@ -225,3 +226,31 @@ def test_a_run_that_hits_nodata_leaves_no_directory(cache, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "NoDataError" in err and "nodata" in err
     assert not (tmp_path / "new").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["holes.tif"]
+
+
+def test_ctrl_c_inside_a_system_callback_is_an_interrupt(small_site):
+    """SIGINT that lands while a library runs inside a system's callback can come back as
+    another error (seen in CI: numba compiling during the first step, reported by Drake
+    as "initialization failed"); simulate() still reports it as KeyboardInterrupt (exit
+    130 in the CLI), not as a failed simulation, and restores the SIGINT handler."""
+    from lunar_drake.simulation import simulate
+
+    scenario, site = small_site
+    scenario = apply_overrides(scenario, "{sensors: {camera: {enabled: false}}}")
+
+    def interrupt(t, pose):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)  # the handler runs here, inside the callback
+        except KeyboardInterrupt:
+            raise RuntimeError("initialization failed") from None
+
+    with pytest.raises(KeyboardInterrupt):
+        simulate(
+            scenario=scenario,
+            site=site,
+            progress=False,
+            stop_when=interrupt,
+            stop_check_period_s=0.05,
+        )
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
