@@ -5,7 +5,8 @@
 
 Times single calls (median and 90th percentile over --calls calls, after a warm-up) of
 ``wheel_forces`` (forward model, and with the travel-direction blend), ``normal_force``
-and, for reference, one ``reference_slip`` solve. Prints a table; writes JSON.
+and, for comparison, one independent ``wheel_reference.reference_slip`` solve (adaptive
+quadrature and root finding). Prints a table; writes JSON.
 """
 
 from __future__ import annotations
@@ -22,11 +23,11 @@ import numpy as np
 from lunar_drake.dynamics.terramechanics import (
     LUNAR_REGOLITH,
     WheelParams,
+    equilibrium_sinkage,
     normal_force,
-    reference_slip,
-    static_sinkage,
     wheel_forces,
 )
+from lunar_drake.dynamics.wheel_reference import reference_slip
 from lunar_drake.files import atomic_write_text, check_output_file
 from lunar_drake.moon import GRAVITY_MPS2
 
@@ -60,7 +61,7 @@ def main(argv=None) -> int:
     n = a.wheels
     rng = np.random.default_rng(0)
     W = np.full(n, 50.0 * GRAVITY_MPS2)
-    z = static_sinkage(W, wheel=wheel, soil=soil) * rng.uniform(0.8, 1.2, n)
+    z = equilibrium_sinkage(W, wheel=wheel, soil=soil) * rng.uniform(0.8, 1.2, n)
     z_dot = rng.normal(0.0, 0.01, n)
     slip = rng.uniform(0.0, 0.4, n)
     beta = rng.normal(0.0, 0.05, n)
@@ -68,16 +69,18 @@ def main(argv=None) -> int:
 
     rows = {
         "wheel_forces": _time(
-            lambda: wheel_forces(slip=slip, slip_angle=beta, W=W, z=z, wheel=wheel, soil=soil),
+            lambda: wheel_forces(slip=slip, slip_angle=beta, z=z, wheel=wheel, soil=soil),
             a.calls,
         ),
         "wheel_forces(direction=)": _time(
             lambda: wheel_forces(
-                slip=slip, slip_angle=beta, W=W, z=z, wheel=wheel, soil=soil, direction=direction
+                slip=slip, slip_angle=beta, z=z, wheel=wheel, soil=soil, direction=direction
             ),
             a.calls,
         ),
-        "normal_force": _time(lambda: normal_force(z, z_dot, wheel=wheel, soil=soil), a.calls),
+        "normal_force": _time(
+            lambda: normal_force(z, z_dot, vertical=W, wheel=wheel, soil=soil), a.calls
+        ),
         "reference_slip(10 deg)": _time(
             lambda: reference_slip(
                 slope_rad=math.radians(10.0), wheel_loads_N=W, wheel=wheel, soil=soil

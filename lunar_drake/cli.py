@@ -5,11 +5,13 @@ lunar-drake run [--scenario NAME|FILE[:NAME]|RUN/scenario.yaml] [--scenario-text
                 [--no-meshcat] [--meshcat-host HOST] [--wait] [--no-progress]
 lunar-drake terrain synth --size N --resolution M --seed S --out DIR [...]
 lunar-drake scenarios [FILE]
+lunar-drake slip-fit DATA.csv --rover {skid,explicit} --out DIR [--base-soil NAME|FILE]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -248,6 +250,12 @@ def _cmd_slip_study(args) -> int:
 
     slopes = parse_slopes(args.slopes)
     rovers = [r.strip() for r in args.rover.split(",")]
+    data = None
+    if args.data is not None:
+        from lunar_drake.studies.slip_fit import read_slip_data
+
+        d = read_slip_data(args.data)
+        data = (d.slope_deg, d.slip)
     rows = run_slip_study(
         rovers=rovers,
         slopes_deg=slopes,
@@ -256,16 +264,35 @@ def _cmd_slip_study(args) -> int:
         out_dir=args.out,
         soil=args.soil,
         speed_mps=args.speed,
+        roughness_m=args.roughness,
+        data=data,
         workers=args.workers,
         progress=not args.no_progress,
     )
-    print(f"{'rover':<9} {'slope':>6} {'mean slip':>10} {'min':>7} {'max':>7} {'reference':>10}")
+    print(
+        f"{'rover':<9} {'slope':>6} {'mean slip':>10} {'std':>7} {'min':>7} {'max':>7} "
+        f"{'reference':>10}"
+    )
     for r in summarize(rows):
+        ref = "cannot climb" if r["immobilized"] else f"{100 * r['reference']:>9.2f}%"
         print(
             f"{r['rover']:<9} {r['slope_deg']:>6.1f} {100 * r['mean']:>9.2f}% "
-            f"{100 * r['min']:>6.2f}% {100 * r['max']:>6.2f}% {100 * r['reference']:>9.2f}%"
+            f"{100 * r['std']:>6.2f}% {100 * r['min']:>6.2f}% {100 * r['max']:>6.2f}% {ref:>10}"
         )
     print(f"Outputs: {Path(args.out).resolve()} (slip.csv, slip.png, params.json)")
+    return 0
+
+
+def _cmd_slip_fit(args) -> int:
+    from lunar_drake.studies.slip_fit import describe, run_slip_fit
+
+    print(f"Fitting phi and K to {args.data} ({args.rover} rover)...", flush=True)
+    fit = run_slip_fit(
+        data_path=args.data, rover=args.rover, out_dir=args.out, base_soil=args.base_soil
+    )
+    for line in describe(fit):
+        print(line)
+    print(f"Outputs: {Path(args.out).resolve()} (soil.yaml, fit.csv, fit.png)")
     return 0
 
 
@@ -327,12 +354,39 @@ def build_parser() -> argparse.ArgumentParser:
     ss.add_argument("--slopes", default="0:20:5", help="A:B:STEP in degrees, or a comma list")
     ss.add_argument("--distance", type=_positive_float, default=5.0, help="metres upslope")
     ss.add_argument("--seeds", type=_positive_int, default=3)
-    ss.add_argument("--soil", default="lunar_regolith", help="lunar_regolith or grc1")
+    ss.add_argument(
+        "--soil",
+        default="lunar_regolith",
+        help="a soil preset (lunar_regolith, grc1, jsc1a) or a soil YAML (e.g. slip-fit's)",
+    )
+    ss.add_argument(
+        "--roughness",
+        type=float,
+        default=0.0,
+        metavar="RMS_M",
+        help="seeded fractal ramp roughness: RMS height deviation at 1 m (m; 0 = planar)",
+    )
+    ss.add_argument(
+        "--data", default=None, help="measured slope_deg,slip CSV to draw on slip.png (optional)"
+    )
     ss.add_argument("--speed", type=_positive_float, default=0.1, help="commanded m/s")
     ss.add_argument("--workers", type=_positive_int, default=1, help="parallel processes")
     ss.add_argument("--out", required=True)
     ss.add_argument("--no-progress", action="store_true")
     ss.set_defaults(func=_cmd_slip_study)
+
+    sf = sub.add_parser(
+        "slip-fit", help="fit soil phi and K to measured slip vs slope (Wong-Reece reference)"
+    )
+    sf.add_argument("data", help="CSV with columns slope_deg,slip (slip a fraction)")
+    sf.add_argument("--rover", choices=["skid", "explicit"], default="explicit")
+    sf.add_argument(
+        "--base-soil",
+        default="lunar_regolith",
+        help="soil whose other parameters are kept: lunar_regolith, grc1, jsc1a or a YAML file",
+    )
+    sf.add_argument("--out", required=True, help="output directory (soil.yaml, fit.csv, fit.png)")
+    sf.set_defaults(func=_cmd_slip_fit)
 
     from lunar_drake.ephemeris import cli as ephemeris_cli
 
@@ -407,17 +461,42 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Runs one command; returns the exit status (0, 2 for bad input, 130 interrupted)."""
+    from lunar_drake import interrupts
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    sigint = interrupts.LatchedSigint()
     try:
         return args.func(args)
     except LunarDrakeError as exc:
+        if interrupts.requested():  # Ctrl-C that a library turned into another error
+            return _interrupted()
         print(f"lunar-drake: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("lunar-drake: interrupted; partial outputs removed", file=sys.stderr)
-        return 130
+        return _interrupted()
+    finally:
+        sigint.restore()
+
+
+def _interrupted() -> int:
+    print("lunar-drake: interrupted; partial outputs removed", file=sys.stderr)
+    return 130
+
+
+def run() -> None:
+    """The ``lunar-drake`` program: :func:`main`, then exit with its status. After Ctrl-C
+    it exits at once (streams flushed) instead of finalizing the interpreter: an
+    extension interrupted mid-import (Open3D) can otherwise fail at exit and turn 130
+    into 1, or re-raise the interrupt."""
+    code = main()
+    if code == 130:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    sys.exit(code)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import dataclasses as dc
 import re
-import signal
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from lunar_drake import interrupts
 from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
 from lunar_drake.errors import SimulationError
 from lunar_drake.scenario import Scenario
@@ -188,6 +187,8 @@ def simulate(
     clock = {"next_check": 0.0, "next_bar": 0.0, "wall0": None}
 
     def monitor(context):
+        if interrupts.requested():  # Ctrl-C whose KeyboardInterrupt something swallowed
+            raise KeyboardInterrupt
         t = context.get_time()
         if off_port.Eval(mctx)[0] > 0.5:
             x, y = pose_port.Eval(mctx)[:2]
@@ -211,8 +212,10 @@ def simulate(
     simulator.set_monitor(monitor)
     if meshcat is not None:
         meshcat.StartRecording(set_visualizations_while_recording=True)
-    interrupted = _InterruptFlag()
+    sigint = interrupts.LatchedSigint()
     try:
+        if interrupts.requested():  # Ctrl-C while building, its exception swallowed
+            raise KeyboardInterrupt
         t_built = time.perf_counter()
         clock["wall0"] = t_built - 1e-9
         try:
@@ -221,7 +224,7 @@ def simulate(
         except (KeyboardInterrupt, SimulationError):
             raise
         except Exception as exc:  # Drake raises RuntimeError on integrator failures.
-            if interrupted.seen:
+            if interrupts.requested():
                 # Ctrl-C inside a system's Python callback reaches us through C++ as a
                 # RuntimeError ("initialization failed", ...): it is still an interrupt.
                 raise KeyboardInterrupt from None
@@ -232,7 +235,7 @@ def simulate(
         if bar is not None:
             _update_bar(bar, root.get_time(), t_sim - t_built)
     finally:
-        interrupted.restore()
+        sigint.restore()
         if bar is not None:
             bar.close()
     if meshcat is not None:
@@ -296,25 +299,3 @@ def _update_bar(bar, t: float, wall_s: float) -> None:
     if wall_s > 0:
         bar.set_postfix_str(f"{t / wall_s:.1f}x real time", refresh=False)
     bar.refresh()
-
-
-class _InterruptFlag:
-    """Records SIGINT while a simulation runs (main thread only) and raises
-    KeyboardInterrupt as Python's default handler does; ``restore()`` puts the previous
-    handler back."""
-
-    def __init__(self) -> None:
-        self.seen = False
-        self._installed = threading.current_thread() is threading.main_thread()
-        if self._installed:
-            self._previous = signal.signal(signal.SIGINT, self._handle)
-
-    def _handle(self, signum, frame):
-        self.seen = True
-        raise KeyboardInterrupt
-
-    def restore(self) -> None:
-        if self._installed:
-            previous = self._previous
-            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
-            self._installed = False

@@ -64,7 +64,7 @@ def _spawn(rover, *, side_deg: float, along_deg: float) -> RigidTransform:
     fwd = np.array([1.0, 0.0, ta]) / math.sqrt(1.0 + ta * ta)
     R = RotationMatrix(np.column_stack([fwd, np.cross(n, fwd), n]))
     wheel = tm.WheelParams(radius_m=d.wheel_radius_m, width_m=d.wheel_width_m)
-    sink = float(tm.static_sinkage(max(rover.static_wheel_load_N), wheel=wheel, soil=SOIL))
+    sink = float(tm.equilibrium_sinkage(max(rover.static_wheel_load_N), wheel=wheel, soil=SOIL))
     h = -d.wheel_centres_C()[:, 2].min() + d.wheel_radius_m - sink
     return RigidTransform(R, h * n)
 
@@ -417,7 +417,6 @@ def test_contact_at_driving_speed_ignores_the_patch_state():
     f = tm.wheel_forces(
         slip=st0["slip"],
         slip_angle=st0["slip_angle_rad"],
-        W=st0["normal_force_N"],
         z=st0["sinkage_m"],
         wheel=WHEEL,
         soil=SOIL,

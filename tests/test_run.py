@@ -254,3 +254,33 @@ def test_ctrl_c_inside_a_system_callback_is_an_interrupt(small_site):
             stop_check_period_s=0.05,
         )
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_ctrl_c_swallowed_before_the_simulation_still_stops_it(small_site):
+    """A KeyboardInterrupt can be swallowed outright (seen: in an importlib callback,
+    "Exception ignored"); the CLI latches SIGINT, and simulate() under it stops at once.
+    Library use (no latch owner) starts clean and leaves no latch behind."""
+    from lunar_drake import interrupts
+    from lunar_drake.simulation import simulate
+
+    scenario, site = small_site
+    scenario = apply_overrides(scenario, "{sensors: {camera: {enabled: false}}}")
+    owner = interrupts.LatchedSigint()  # what cli.main installs
+    try:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass  # swallowed, as an import callback would
+        assert interrupts.requested()
+        with pytest.raises(KeyboardInterrupt):
+            simulate(scenario=scenario, site=site, progress=False)
+        assert interrupts.requested()  # simulate() is nested: the latch is the owner's
+    finally:
+        owner.restore()
+    assert not interrupts.requested()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # A later library run is not affected.
+    logs = simulate(scenario=apply_overrides(scenario, "{simulation_duration: 0.1}"), site=site,
+                    progress=False)  # fmt: skip
+    assert logs.stop_reason == "duration reached"

@@ -1,12 +1,14 @@
-"""Rigid-wheel terramechanics core: Bekker sinkage, Wong-Reece stresses, Janosi-Hanamoto shear,
-and a static shear patch that holds a wheel at rest.
+"""Rigid-wheel terramechanics core: one Wong-Reece wheel (normal stress and
+Janosi-Hanamoto shear integrated over the contact angle), lateral shear and bulldozing,
+grousers, and a static shear patch that holds a wheel at rest.
 
-Pure numpy/scipy (no Drake). A LeafSystem calls :func:`normal_force`,
-:func:`wheel_forces` and the static shear patch functions (:func:`patch_static_force`,
-:func:`update_patch_displacement`) once per plant step for all wheels at once, so every
-per-step function takes arrays (one entry per wheel), uses closed forms or a fixed
-24-node Gauss-Legendre quadrature, and has no Python loop over wheels and no root
-finding.
+Pure numpy/numba (no Drake). A LeafSystem calls :func:`wheel_forces`,
+:func:`normal_force` and the static shear patch functions (:func:`patch_static_force`,
+:func:`update_patch_displacement`) once per plant step for all wheels at once: every
+per-step function takes arrays (one entry per wheel), uses a fixed 12 + 12 node
+Gauss-Legendre quadrature compiled with numba, and has no root finding. The
+independent steady-state check of this model (adaptive quadrature and root finding,
+written separately) is :mod:`lunar_drake.dynamics.wheel_reference`.
 
 Frames and signs
 ----------------
@@ -18,13 +20,13 @@ world frame and applies them at the contact point.
 * ``z`` (sinkage, m) is the penetration of the wheel's lowest point below the local
   terrain surface along ``C.z``, positive into the soil; ``z_dot`` (m/s) is positive
   while sinking.
-* :func:`normal_force` is the force along ``+C.z`` (>= 0: the soil never pulls).
-* :class:`WheelForces`: ``thrust`` (N, along ``+C.x``), ``resistance`` (N, compaction
-  resistance, positive when it opposes forward travel, i.e. it acts along ``-C.x``),
-  ``drawbar_pull = thrust - resistance`` (the net force along ``+C.x``), ``lateral``
-  (N, along ``+C.y``; opposes lateral sliding) and ``torque`` (N m, the moment of the
-  soil shear about the axle, positive when it opposes forward rolling; as a vector about
-  ``+C.y`` it is ``-torque``, since forward rolling is a positive spin about ``+C.y``).
+* :class:`WheelForces`: ``vertical`` (N, along ``+C.z``: the load the stresses carry),
+  ``thrust`` (N, along ``+C.x``), ``resistance`` (N, compaction resistance, positive
+  when it opposes forward travel), ``drawbar_pull = thrust - resistance``, ``lateral``
+  (N, along ``+C.y``) and ``torque`` (N m, the moment of the soil shear about the axle,
+  positive when it opposes forward rolling; as a vector about ``+C.y`` it is
+  ``-torque``).
+* :func:`normal_force` is the force along ``+C.z``: ``vertical`` plus damping, >= 0.
 
 Slip conventions
 ----------------
@@ -36,55 +38,59 @@ Slip conventions
   (rightward) lateral force.
 * ``direction`` (optional, in [-1, 1], :func:`travel_direction`) is the regularized
   sign of travel along ``C.x``. With ``direction = d`` the forward-travel model and its
-  mirror image (wheel travelling backward) are blended with weights ``(1 + d)/2`` and
-  ``(1 - d)/2``, and the compaction resistance is scaled by ``d``. Thus a wheel at rest
-  (``v = 0``, ``omega = 0``) feels no force, and everything is continuous through
-  ``v = 0``. Omit it (``None``) for a wheel known to travel forward.
+  mirror image (wheel travelling backward: slip ``-s``, x-forces and torque negated)
+  are blended with weights ``(1 + d)/2`` and ``(1 - d)/2``. Thus a wheel at rest
+  (``v = 0``, ``omega = 0``) feels no tangential force (it still carries its load), and
+  everything is continuous through ``v = 0``. Omit it (``None``) for a wheel known to
+  travel forward.
 
 Model (per wheel; theta measured from the downward vertical, positive forward)
 ------------------------------------------------------------------------------
-* Normal load vs sinkage, Bekker's rigid-wheel closed form (Bekker 1969, *Introduction
-  to Terrain-Vehicle Systems*; Wong 2008, *Theory of Ground Vehicles*, 4th ed., §2.4)::
+Wong & Reece (1967) with Janosi & Hanamoto (1961) shear, as in Wong (2008), *Theory of
+Ground Vehicles*, 4th ed., ch. 2 and 4, and Ishigami, Miwa, Nagatani & Yoshida (2007),
+J. Field Robotics 24(3), for the lateral force:
 
-      W(z) = (3 - n) (k_c + b k_phi) sqrt(2 r) z^((2n + 1)/2) / 3
+* Entry angle ``theta_1 = arccos(1 - z/r)``, exit angle ``theta_2 = -rear_angle_ratio
+  theta_1``, maximum-stress angle ``theta_m = (c1 + c2 s) theta_1`` (clamped to
+  ``[0, 0.99] theta_1``).
+* Normal stress, ``k = k_c/b + k_phi``: ahead of the peak
+  ``sigma = k r^n (cos theta - cos theta_1)^n``; behind it the Wong-Reece mapping
+  ``sigma = k r^n (cos(theta_1 - (theta - theta_2)(theta_1 - theta_m)/(theta_m -
+  theta_2)) - cos theta_1)^n``.
+* Shear on a surface of radius ``r_s = r + lambda h_g`` (grousers of height ``h_g``;
+  Ding et al. 2011's equivalent radius, ``lambda`` = ``grouser_ratio``; ``r_s = r``
+  without grousers): ``j = r_s[(theta_1 - theta) - (1 - s)(sin theta_1 - sin
+  theta)]``, ``tau = (c + sigma tan phi)(1 - exp(-|j|/K)) sign(j)``.
+* From the same stresses::
 
-* Compaction (motion) resistance, Bekker::  R_c = (k_c + b k_phi) z^(n+1) / (n + 1)
-* Entry angle ``theta_1 = arccos(1 - z/r)`` (``z`` capped at ``r``), exit angle
-  ``theta_2 = -rear_angle_ratio theta_1``, max-stress angle
-  ``theta_m = (c1 + c2 s) theta_1`` (Wong & Reece 1967).
-* Normal stress: Wong-Reece shape, ``(cos theta - cos theta_1)^n`` ahead of
-  ``theta_m`` and its mapped mirror behind it, scaled so its vertical resultant equals
-  the load ``W`` passed for this step (so transient loads from the compliant contact
-  carry into traction). Note that at the same sinkage the Wong-Reece distribution
-  (peak at ``theta_m`` instead of the bottom) supports less load than Bekker's closed
-  form: with ``W`` = Bekker ``W(z)`` the stresses come out 1.45x (``s = 0``) to 2.7x
-  (``s = 0.9``) the raw ``(k_c/b + k_phi) r^n (cos theta - cos theta_1)^n`` for the
-  default coefficients. The load is taken as authoritative (it is what the plant's
-  contact carries); the shear component of the vertical balance is neglected.
-* Shear (Janosi & Hanamoto 1961, Mohr-Coulomb envelope)::
+      V  = b int (r sigma cos theta + r_s tau sin theta)    vertical load carried
+      H  = r_s b int tau cos theta                           thrust
+      R  = r b int sigma sin theta                           compaction resistance
+      DP = H - R,   T = r_s^2 b int tau                      drawbar pull, torque
 
-      tau = (c + sigma tan phi) (1 - exp(-|j| / K)) sign(j),   j = s x,
-      x = r (sin theta_1 - sin theta)  (horizontal distance from the entry point)
-
-  Wong & Reece's tangential form is ``j = r[(theta_1 - theta) - (1 - s)(sin theta_1 -
-  sin theta)] = s x + r[(theta_1 - theta) - (sin theta_1 - sin theta)]``; we drop the
-  second, purely geometric term (``~ r (theta_1^3 - theta^3)/6``, about 1 mm at the
-  bottom for ``r = 0.25 m``, ``z = 1 cm``) so that at ``s = 0`` the shear displacement
-  is exactly zero: a freely rolling wheel develops no thrust and only compaction
-  resistance acts (drawbar pull = -R_c, the rolling resistance).
-* Thrust ``H = r b int tau cos theta``, torque ``T = r^2 b int tau``, drawbar pull
-  ``DP = H - R_c`` (Wong 2008 §4; Wong & Reece 1967).
-* Lateral shear (Ishigami, Miwa, Nagatani & Yoshida 2007, J. Field Robotics 24(3))::
-
-      j_y = r (1 - s)(theta_1 - theta) tan|beta|,
-      F_y = -sign(beta) r b int (c + sigma tan phi)(1 - exp(-j_y / K_y))
-
-  The side-wall bulldozing term of Ishigami et al. is not modelled, and longitudinal
-  and lateral shear are not coupled through a common strength envelope.
-* Compliant contact normal force: ``N = max(0, W(z) + d(z) z_dot)`` with
-  ``d(z) = 2 zeta sqrt(W'(z) W(z) / g) = 2 zeta (k_c + b k_phi) sqrt(2 r) (3 - n)/3
-  sqrt((2n + 1)/(2 g)) z^n``: the damping that gives damping ratio ``zeta`` to a mass
-  ``W(z)/g`` resting at ``z`` (Hunt-Crossley-like: it vanishes at ``z = 0``).
+  So the sinkage at which a wheel settles (``V`` = its load) depends on slip: the peak
+  moves forward and the rear shear pulls down as ``s`` grows (slip-sinkage), and a
+  dynamic simulation finds that sinkage itself (the normal force is ``V`` at the
+  current penetration, plus damping). :func:`equilibrium_sinkage` solves it for a
+  steady wheel.
+* Lateral (Ishigami et al. 2007): ``j_y = r (1 - s)(theta_1 - theta) |tan beta|``,
+  ``tau_y = (c + sigma tan phi)(1 - exp(-j_y / K_y))``; side-wall bulldozing
+  ``R_b(h) = D1 (c h + D2 rho g h^2 / 2)`` per unit arc with ``h = r (cos theta - cos
+  theta_1)``, ``X_c = 45 deg - phi/2``, ``D1 = cot X_c + tan(X_c + phi)``,
+  ``D2 = cot X_c + cot^2 X_c tan phi``; ``F_y = -sign(beta)(r b int tau_y +
+  |sin beta| int R_b(h)(r - h cos theta))``. The ``|sin beta|`` factor is ours: it
+  fades the bulldozing in with the sideways share of the motion (Ishigami et al. switch
+  it on for any ``beta != 0``, a step that an explicit dynamic step would chatter on).
+  Longitudinal and lateral shear are not coupled through a common strength envelope.
+* Compliant contact normal force: ``N = max(0, V + d(z) z_dot)`` with
+  ``d(z) = 2 zeta sqrt(W'(z) W(z) / g)`` from Bekker's closed-form rigid-wheel load
+  ``W(z) = (3 - n)(k_c + b k_phi) sqrt(2 r) z^((2n + 1)/2) / 3`` (:func:`bekker_load`;
+  Bekker 1969): the damping that gives damping ratio ``zeta`` to a mass ``W(z)/g``
+  resting at ``z``, a numerical choice (it vanishes at ``z = 0``). Bekker's ``W`` and
+  compaction resistance (:func:`compaction_resistance`) are kept as classical closed
+  forms; the wheel's load and resistance are the integrals above. At the same sinkage
+  the Wong-Reece stresses (peak ahead of the bottom) carry less than Bekker's ``W``, so
+  a wheel sits deeper than :func:`static_sinkage` says.
 
 Static shear patch (stiction)
 -----------------------------
@@ -166,14 +172,15 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
-from scipy.optimize import brentq
 
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.moon import GRAVITY_MPS2
 
 __all__ = [
     "GRC1",
+    "JSC1A",
     "LUNAR_REGOLITH",
     "SOIL_PRESETS",
     "ImmobilizedError",
@@ -188,17 +195,17 @@ __all__ = [
     "contact_stiffness",
     "drawbar_pull",
     "entry_angle",
+    "equilibrium_sinkage",
     "normal_force",
     "patch_length",
     "patch_slip_velocity",
     "patch_static_force",
     "patch_strength",
-    "reference_slip",
+    "shear_radius",
     "shear_stress",
     "slip_angle",
     "slip_ratio",
     "slip_vs_drawbar_curve",
-    "slip_vs_slope_curve",
     "soil_preset",
     "static_sinkage",
     "static_weight",
@@ -210,8 +217,6 @@ __all__ = [
 
 QUADRATURE_NODES_PER_SEGMENT = 12
 """Gauss-Legendre nodes on each of [theta_2, theta_m] and [theta_m, theta_1]."""
-
-_MIN_SINKAGE_FRACTION = 1.0e-12  # of the radius: entry angle >= ~1.4e-6 rad
 
 _x, _w = np.polynomial.legendre.leggauss(QUADRATURE_NODES_PER_SEGMENT)
 _U = 0.5 * (_x + 1.0)  # nodes on [0, 1]; symmetric: _U[::-1] == 1 - _U
@@ -308,19 +313,28 @@ class SoilParams:
 
 @dataclass(frozen=True)
 class WheelParams:
-    """Rigid cylindrical wheel.
+    """Rigid cylindrical wheel, optionally with grousers.
 
     Attributes:
-        radius_m: wheel radius r, m, in (0, 5].
+        radius_m: rim radius r, m, in (0, 5].
         width_m: wheel (contact) width b, m, in (0, 3].
+        grouser_height_m: grouser height h_g, m, in [0, radius_m]; 0 for a smooth rim.
+        grouser_ratio: lambda in [0, 1]: the soil shears on a surface of radius
+            ``r_s = r + lambda h_g`` (Ding et al. 2011's equivalent shear radius; 1: at
+            the grouser tips, 0: grousers ignored).
     """
 
     radius_m: float = 0.25
     width_m: float = 0.2
+    grouser_height_m: float = 0.0
+    grouser_ratio: float = 1.0
 
     def __post_init__(self) -> None:
         _check("radius_m", self.radius_m, 0.0, 5.0, lo_open=True, unit=" m")
         _check("width_m", self.width_m, 0.0, 3.0, lo_open=True, unit=" m")
+        _check("grouser_height_m", self.grouser_height_m, 0.0, self.radius_m,
+               unit=" m (at most the radius)")  # fmt: skip
+        _check("grouser_ratio", self.grouser_ratio, 0.0, 1.0)
 
 
 LUNAR_REGOLITH = SoilParams(
@@ -375,16 +389,58 @@ GRC1 = SoilParams(
 )
 """GRC-1 lunar simulant used for the RP rover tests at NASA GRC (see inline notes)."""
 
-SOIL_PRESETS: dict[str, SoilParams] = {"lunar_regolith": LUNAR_REGOLITH, "grc1": GRC1}
+JSC1A = SoilParams(
+    name="jsc1a",
+    # JSC-1A lunar mare soil simulant (Orbitec/NASA JSC, a crushed basaltic ash).
+    # Verified (abstracts read via search): direct-shear friction angles of 30 to 70 deg
+    # depending on relative density and normal load (Iai & Luna 2011, J. Aerospace
+    # Engineering, "Direct shear tests on JSC-1A lunar regolith simulant"); peak triaxial
+    # friction and dilatancy strongly density- and confinement-dependent (Alshibli &
+    # Hasan 2009, J. Geotech. Geoenviron. Eng. 135(5)); Zeng et al. 2010 (J. Aerospace
+    # Engineering 23(2), 111-116) and Arslan, Batiste & Sture 2010 (J. Aerospace
+    # Engineering 23(1), 70-83) measured cohesion, friction and densities -- their
+    # numbers were not at hand. Everything below is from memory or assumed:
+    # * n, k_c, k_phi: assumed equal to the lunar nominal set (no verified bevameter
+    #   triple for JSC-1A at hand; reported k_phi values for prepared beds scatter by
+    #   4x or more with density).
+    # * phi = 40 deg: a medium-dense triaxial value (from memory; inside the verified
+    #   30-70 deg direct-shear range).
+    # * c = 1.0 kPa: the simulant's angular, interlocking grains give more apparent
+    #   cohesion than lunar nominal (from memory: ~0.5-3 kPa with density).
+    # * K = 1.8 cm, K_y = K: assumed (lunar nominal).
+    # * density 1.65 g/cm^3: a typical prepared-bed bulk density (from memory).
+    # * c1, c2: Wong & Reece sand coefficients (as the other presets); no rebound.
+    n=1.0,
+    k_c=1400.0,
+    k_phi=820_000.0,
+    c=1000.0,
+    phi=math.radians(40.0),
+    K=0.018,
+    c1=0.43,
+    c2=0.32,
+    rear_angle_ratio=0.0,
+    K_y=0.018,
+    density=1650.0,
+    damping_ratio=0.5,
+)
+"""JSC-1A lunar simulant (see the inline notes: mostly from memory)."""
+
+SOIL_PRESETS: dict[str, SoilParams] = {
+    "lunar_regolith": LUNAR_REGOLITH,
+    "grc1": GRC1,
+    "jsc1a": JSC1A,
+}
 
 
 def soil_preset(name: str) -> SoilParams:
-    """The named soil preset (case-insensitive; ``-`` and ``_`` optional for ``grc1``)."""
+    """The named soil preset (case-insensitive; ``-`` and ``_`` optional: ``GRC-1``,
+    ``JSC-1A``)."""
     key = str(name).strip().lower()
     if key in SOIL_PRESETS:
         return dataclasses.replace(SOIL_PRESETS[key])  # a copy: configs are mutable
-    if key.replace("-", "").replace("_", "") == "grc1":
-        return dataclasses.replace(GRC1)
+    bare = key.replace("-", "").replace("_", "")
+    if bare in SOIL_PRESETS:
+        return dataclasses.replace(SOIL_PRESETS[bare])
     raise ConfigError(f"soil preset {name!r} is unknown; choose one of {sorted(SOIL_PRESETS)}")
 
 
@@ -456,25 +512,27 @@ def normal_force(
     z,
     z_dot,
     *,
+    vertical,
     wheel: WheelParams,
     soil: SoilParams,
     gravity_mps2: float = GRAVITY_MPS2,
 ) -> np.ndarray:
     """Compliant contact normal force (N, along the terrain normal, >= 0).
 
-    ``N = max(0, W(z) + d(z) z_dot)`` with Bekker's ``W`` (:func:`bekker_load`) and
-    :func:`contact_damping` ``d``. Both terms vanish at ``z = 0`` so ``N`` is continuous
-    at contact onset, and ``N = 0`` for ``z <= 0``.
+    ``N = max(0, V + d(z) z_dot)`` with ``V`` the vertical load the Wong-Reece stresses
+    carry at this sinkage and slip (``vertical``: :attr:`WheelForces.vertical`) and the
+    damping :func:`contact_damping` ``d``. Both vanish at ``z = 0`` so ``N`` is
+    continuous at contact onset; ``N = 0`` for ``z <= 0``.
 
     Args:
         z: penetration (sinkage), m, positive into the soil (array over wheels).
         z_dot: its rate, m/s, positive while sinking.
+        vertical: V, N (array over wheels).
     """
     zp = np.maximum(np.asarray(z, dtype=np.float64), 0.0)
-    A = _bekker_coefficient(wheel, soil)
-    d = 2.0 * soil.damping_ratio * A * math.sqrt((soil.n + 0.5) / gravity_mps2)
-    zn = zp**soil.n
-    return np.maximum(zn * (A * np.sqrt(zp) + d * np.asarray(z_dot, dtype=np.float64)), 0.0)
+    d = contact_damping(zp, wheel=wheel, soil=soil, gravity_mps2=gravity_mps2)
+    on = zp > 0.0
+    return np.maximum(np.asarray(vertical) + d * np.asarray(z_dot, dtype=np.float64), 0.0) * on
 
 
 def compaction_resistance(z, *, wheel: WheelParams, soil: SoilParams) -> np.ndarray:
@@ -547,14 +605,19 @@ class WheelForces:
     """Per-wheel soil forces in the contact frame (arrays, one entry per wheel).
 
     Attributes:
-        thrust: shear thrust H along +x, N.
-        resistance: compaction resistance R_c, N, positive when opposing forward travel
-            (acts along -x).
+        vertical: load the soil stresses carry along +z at this sinkage and slip, N
+            (``b int (r sigma cos theta + r_s tau sin theta)``); the plant's normal force
+            is this plus the contact damping (:func:`normal_force`).
+        thrust: shear thrust ``r_s b int tau cos theta`` along +x, N.
+        resistance: compaction resistance ``r b int sigma sin theta``, N, positive when
+            opposing forward travel (acts along -x).
         drawbar_pull: thrust - resistance, the net force along +x, N.
-        lateral: side force along +y, N.
-        torque: soil moment about the axle, N m, positive when opposing forward rolling.
+        lateral: side force along +y (shear plus side-wall bulldozing), N.
+        torque: soil moment about the axle ``r_s^2 b int tau``, N m, positive when
+            opposing forward rolling (the torque a drive motor supplies in steady state).
     """
 
+    vertical: np.ndarray
     thrust: np.ndarray
     resistance: np.ndarray
     drawbar_pull: np.ndarray
@@ -562,159 +625,223 @@ class WheelForces:
     torque: np.ndarray
 
 
-def _node_pattern(rear_angle_ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """Constants (A, B) such that, with f = theta_m / theta_1, ``theta_1 (f A + B)``
-    holds the 2K quadrature nodes (front segment [theta_m, theta_1] first, then the rear
-    segment [theta_2, theta_m]) followed by their 2K weights."""
-    rho = rear_angle_ratio
-    A = np.concatenate((1.0 - _U, _U, -_WU, _WU))
-    B = np.concatenate((_U, -rho * (1.0 - _U), _WU, rho * _WU))
-    return A, B
+@numba.njit(cache=True)
+def _wong_reece_kernel(s, tan_beta, z, direction, par, U, WU, out):  # pragma: no cover - numba
+    """Fills ``out`` (m, 6): vertical, thrust, resistance, torque, lateral shear integral,
+    bulldozing integral (see :func:`wheel_forces`; ``par`` packs the wheel and soil)."""
+    r, b, rs, n, ksig, c, tphi, K, Ky, c1, c2, rho, D1, D2g = (
+        par[0], par[1], par[2], par[3], par[4], par[5], par[6], par[7], par[8], par[9],
+        par[10], par[11], par[12], par[13],
+    )  # fmt: skip
+    m = s.shape[0]
+    nq = U.shape[0]
+    for i in range(m):
+        zi = z[i]
+        for q in range(6):
+            out[i, q] = 0.0
+        if not zi > 0.0:
+            continue
+        zi = min(max(zi, 1e-12 * r), r)
+        cos1 = 1.0 - zi / r
+        th1 = math.acos(cos1)
+        sin1 = math.sin(th1)
+        th2 = -rho * th1
+        d = direction[i]
+        wf = 0.5 * (1.0 + d)
+        wb = 0.5 * (1.0 - d)
+        lat_rate = abs(tan_beta[i]) * r / Ky
+        for mode in range(2):
+            w_mode = wf if mode == 0 else wb
+            if w_mode == 0.0:
+                continue
+            sm = s[i] if mode == 0 else -s[i]  # the mirror image: travelling backward
+            f = min(max(c1 + c2 * sm, 0.0), 0.99)
+            thm = f * th1
+            fz = 0.0
+            h = 0.0
+            res = 0.0
+            tq = 0.0
+            fy = 0.0
+            fb = 0.0
+            for seg in range(2):
+                if seg == 0:  # front [theta_m, theta_1]
+                    lo = thm
+                    span = th1 - thm
+                else:  # rear [theta_2, theta_m]
+                    lo = th2
+                    span = thm - th2
+                if span <= 0.0:
+                    continue
+                for k in range(nq):
+                    th = lo + U[k] * span
+                    w = WU[k] * span
+                    if seg == 0:
+                        base = math.cos(th) - cos1
+                    else:  # Wong-Reece: theta* = theta_1 - u (theta_1 - theta_m)
+                        base = math.cos(th1 - U[k] * (th1 - thm)) - cos1
+                    if base <= 0.0:
+                        sig = 0.0
+                    elif n == 1.0:
+                        sig = ksig * base
+                    else:
+                        sig = ksig * base**n
+                    cth = math.cos(th)
+                    sth = math.sin(th)
+                    strength = c + sig * tphi
+                    j = rs * ((th1 - th) - (1.0 - sm) * (sin1 - sth))
+                    tau = -strength * math.expm1(-abs(j) / K)
+                    if j < 0.0:
+                        tau = -tau
+                    fz += w * (r * sig * cth + rs * tau * sth)
+                    h += w * tau * cth
+                    res += w * sig * sth
+                    tq += w * tau
+                    jy = (1.0 - sm) * (th1 - th) * lat_rate
+                    fy += w * -strength * math.expm1(-jy)
+                    hb = r * (cth - cos1)
+                    fb += w * D1 * hb * (c + D2g * hb) * (r - hb * cth)
+            sgn = 1.0 if mode == 0 else -1.0
+            out[i, 0] += w_mode * b * fz
+            out[i, 1] += sgn * w_mode * (rs * b) * h
+            out[i, 2] += sgn * w_mode * (r * b) * res
+            out[i, 3] += sgn * w_mode * (rs * rs * b) * tq
+            out[i, 4] += w_mode * (r * b) * fy
+            out[i, 5] += w_mode * fb
 
 
-_K = QUADRATURE_NODES_PER_SEGMENT
-# Rear node k maps (Wong-Reece) to theta* = theta_1 - u_k (theta_1 - theta_m), which is
-# the front node at 1 - u_k: the rear stresses are the front ones reversed.
-_SHAPE_INDEX = np.concatenate((np.arange(_K), np.arange(_K)[::-1]))
-_PATTERN_CACHE: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-
-if hasattr(np, "vecdot"):  # numpy >= 2.0
-    _rowdot = np.vecdot
-else:  # pragma: no cover
-
-    def _rowdot(a, b):
-        return np.einsum("ij,ij->i", a, b)
-
-
-def _shear_integrals(s, lateral_rate, W, z, cohesion, wheel: WheelParams, soil: SoilParams):
-    """Integrals over the contact for forward travel (1-D arrays over wheels).
-
-    Args:
-        s: slip in [-1, 1]; lateral_rate: ``r (1 - s) tan|beta| / K_y``; W: load >= 0;
-        z: sinkage in [_MIN_SINKAGE_FRACTION r, r]; cohesion: c (0 out of contact).
-
-    Returns:
-        The quadrature sums of ``-|tau| cos(theta)``, ``-|tau|`` and ``-|tau_y|`` over
-        the contact angle (multiply by ``-sign(s) r b``, ``-sign(s) r^2 b`` and
-        ``-sign(beta) r b`` for thrust, torque and lateral force).
-    """
-    pattern = _PATTERN_CACHE.get(soil.rear_angle_ratio)
-    if pattern is None:
-        pattern = _PATTERN_CACHE.setdefault(
-            soil.rear_angle_ratio, _node_pattern(soil.rear_angle_ratio)
-        )
-    A, B = pattern
+def _kernel_parameters(wheel: WheelParams, soil: SoilParams, gravity_mps2: float) -> np.ndarray:
     r = wheel.radius_m
-    cos1 = 1.0 - z * (1.0 / r)
-    th1 = np.arccos(cos1)[:, None]
-    f = np.maximum(soil.c1 + soil.c2 * s, 0.0)[:, None]  # < 1 since c1 + c2 <= 0.99, s <= 1
-    P = th1 * (f * A + B)
-    theta = P[:, : 2 * _K]
-    wts = P[:, 2 * _K :]
-    cos_t = np.cos(theta)
-    shape = np.maximum(cos_t[:, _SHAPE_INDEX] - cos1[:, None], 0.0)
-    if soil.n != 1.0:
-        shape = shape**soil.n
-    wc = wts * cos_t
-    # Scale the Wong-Reece shape so that its vertical resultant r b sum(sigma cos w) is W.
-    amp = W * (math.tan(soil.phi) / (r * wheel.width_m)) / np.maximum(_rowdot(shape, wc), 1e-300)
-    strength = cohesion[:, None] + amp[:, None] * shape
-    # Janosi-Hanamoto with j = s x, x = r (sin theta_1 - sin theta) >= 0: sign(j) = sign(s).
-    mob = strength * np.expm1((np.abs(s) * (-r / soil.K))[:, None] * (np.sin(th1) - np.sin(theta)))
-    lat = strength * np.expm1(lateral_rate[:, None] * (theta - th1))
-    return _rowdot(mob, wc), _rowdot(mob, wts), _rowdot(lat, wts)
+    b = wheel.width_m
+    xc = 0.25 * math.pi - 0.5 * soil.phi
+    cot = 1.0 / math.tan(xc)
+    D1 = cot + math.tan(xc + soil.phi)
+    D2 = cot + cot * cot * math.tan(soil.phi)
+    return np.array(
+        [
+            r,
+            b,
+            shear_radius(wheel),
+            soil.n,
+            (soil.k_c / b + soil.k_phi) * r**soil.n,
+            soil.c,
+            math.tan(soil.phi),
+            soil.K,
+            soil.K_y,
+            soil.c1,
+            soil.c2,
+            soil.rear_angle_ratio,
+            D1,
+            # R_b = D1 (c h + D2 rho g h^2 / 2) = D1 h (c + D2g h)
+            0.5 * D2 * soil.density * gravity_mps2,
+        ]
+    )
+
+
+def shear_radius(wheel: WheelParams) -> float:
+    """Radius of the shear surface r_s = r + grouser_ratio * grouser_height_m (m)."""
+    return wheel.radius_m + wheel.grouser_ratio * wheel.grouser_height_m
 
 
 def wheel_forces(
     *,
     slip,
     slip_angle,
-    W,
     z,
     wheel: WheelParams,
     soil: SoilParams,
     direction=None,
+    gravity_mps2: float = GRAVITY_MPS2,
 ) -> WheelForces:
-    """Soil forces on each wheel for this step (vectorized over wheels; see module docs).
+    """Soil forces on each wheel for this step (vectorized over wheels; module docstring).
+
+    One Wong-Reece wheel: normal stress and Janosi-Hanamoto shear integrated over the
+    contact angle at sinkage ``z`` give the vertical load carried, thrust, compaction
+    resistance, torque and (Ishigami et al.) lateral shear plus bulldozing, all from the
+    same stresses. 12 + 12 Gauss-Legendre nodes on [theta_2, theta_m] and
+    [theta_m, theta_1] (compiled with numba).
 
     Args:
         slip: slip ratio s (-), clipped to [-1, 1] (:func:`slip_ratio`).
         slip_angle: slip angle beta, rad (:func:`slip_angle`), in [-pi/2, pi/2].
-        W: normal load carried by the wheel this step, N (e.g. :func:`normal_force`);
-            the Wong-Reece normal stress is scaled so its vertical resultant equals W.
-        z: sinkage, m; sets the contact angles and the compaction resistance. A wheel
-            with ``z <= 0`` is out of contact and gets all zeros.
+        z: sinkage, m; sets the contact angles. A wheel with ``z <= 0`` is out of
+            contact and gets all zeros; ``z`` is capped at ``r``.
         wheel, soil: parameters.
         direction: optional regularized travel sign in [-1, 1] (:func:`travel_direction`);
-            ``None`` means travelling forward. A dynamic simulation should pass it:
-            without it the compaction resistance acts even at rest and would push a
-            parked rover backward.
+            ``None`` means travelling forward. The forward model and its mirror image
+            (travel backward: slip -s, x-forces and torque negated) are blended with
+            weights ``(1 +- direction)/2``, so a wheel at rest feels no tangential force.
+        gravity_mps2: gravity for the bulldozing soil weight, m/s^2.
 
     Returns:
-        WheelForces of arrays broadcast from the inputs (contact frame). At ``s = 0`` and
-        ``beta = 0`` thrust, lateral force and torque are exactly 0 and
-        ``drawbar_pull = -resistance`` (rolling resistance).
+        WheelForces of arrays broadcast from the inputs (contact frame).
     """
     s = np.asarray(slip, dtype=np.float64)
     beta = np.asarray(slip_angle, dtype=np.float64)
-    W = np.asarray(W, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
     shape = s.shape
-    if not (beta.shape == shape and W.shape == shape and z.shape == shape):
-        s, beta, W, z = np.broadcast_arrays(s, beta, W, z)
+    if not (beta.shape == shape and z.shape == shape):
+        s, beta, z = np.broadcast_arrays(s, beta, z)
         shape = s.shape
-    r = wheel.radius_m
-    b = wheel.width_m
     s = np.minimum(np.maximum(s.ravel(), -1.0), 1.0)
     beta = beta.ravel()
-    z = z.ravel()
-    contact = z > 0.0
-    # Out of contact: zero load and cohesion give exactly zero shear forces.
-    W = np.maximum(W.ravel(), 0.0) * contact
-    cohesion = soil.c * contact
-    zq = np.minimum(np.maximum(z, _MIN_SINKAGE_FRACTION * r), r)  # for the contact angles
-    lat_k = np.abs(np.tan(beta)) * (r / soil.K_y)
-    Rc = ((soil.k_c + b * soil.k_phi) / (soil.n + 1.0)) * np.maximum(z, 0.0) ** (soil.n + 1.0)
     if direction is None:
-        hc, ht, fy = _shear_integrals(s, (1.0 - s) * lat_k, W, zq, cohesion, wheel, soil)
-        sgn = np.sign(s)
+        d = np.ones(s.size)
     else:
         d = np.asarray(direction, dtype=np.float64)
         if d.shape != shape:
             d = np.broadcast_to(d, shape)
         d = np.minimum(np.maximum(d.ravel(), -1.0), 1.0)
-        m = s.size
-        # Forward model and its mirror image (travel backward: s -> -s, x -> -x, y kept).
-        s2 = np.concatenate((s, -s))
-        hc2, ht2, fy2 = _shear_integrals(
-            s2,
-            (1.0 - s2) * np.concatenate((lat_k, lat_k)),
-            np.concatenate((W, W)),
-            np.concatenate((zq, zq)),
-            np.concatenate((cohesion, cohesion)),
-            wheel,
-            soil,
-        )
-        wf = 0.5 * (1.0 + d)
-        wb = 0.5 * (1.0 - d)
-        # Mirrored thrust -H(-s) = -(-(r b) sign(-s) hc(-s)) = -(r b) sign(s) hc(-s): the
-        # same prefactor as the forward term, so the raw integrals blend directly.
-        hc = wf * hc2[:m] + wb * hc2[m:]
-        ht = wf * ht2[:m] + wb * ht2[m:]
-        fy = wf * fy2[:m] + wb * fy2[m:]
-        sgn = np.sign(s)
-        Rc = d * Rc
-    k = -(r * b) * sgn
-    H = k * hc
-    T = (r * k) * ht
-    Fy = (r * b) * np.sign(beta) * fy
+    out = np.empty((s.size, 6))
+    par = _kernel_parameters(wheel, soil, gravity_mps2)
+    _wong_reece_kernel(
+        s, np.tan(beta), np.ascontiguousarray(z.ravel()), np.ascontiguousarray(d), par,
+        _U, _WU, out,
+    )  # fmt: skip
+    sb = np.sign(beta)
+    lateral = -sb * (out[:, 4] + np.abs(np.sin(beta)) * out[:, 5])
     return WheelForces(
-        thrust=H.reshape(shape),
-        resistance=Rc.reshape(shape),
-        drawbar_pull=(H - Rc).reshape(shape),
-        lateral=Fy.reshape(shape),
-        torque=T.reshape(shape),
+        vertical=out[:, 0].reshape(shape),
+        thrust=out[:, 1].reshape(shape),
+        resistance=out[:, 2].reshape(shape),
+        drawbar_pull=(out[:, 1] - out[:, 2]).reshape(shape),
+        lateral=lateral.reshape(shape),
+        torque=out[:, 3].reshape(shape),
     )
+
+
+def equilibrium_sinkage(
+    W, *, wheel: WheelParams, soil: SoilParams, slip=0.0, gravity_mps2: float = GRAVITY_MPS2
+) -> np.ndarray:
+    """Sinkage z (m) at which :func:`wheel_forces`' vertical load equals ``W`` (N) at slip
+    ``slip`` (straight travel, forward); 0 for ``W <= 0``. Vectorized bisection (60
+    halvings of [0, r]: ~1e-18 r). Raises ImmobilizedError where even ``z = r`` (the axle
+    at the surface) cannot carry the load."""
+    W, s = np.broadcast_arrays(np.asarray(W, dtype=np.float64), np.asarray(slip, dtype=float))
+    shape = W.shape
+    W = W.ravel()
+    s = s.ravel()
+    r = wheel.radius_m
+
+    def vertical(zz):
+        return wheel_forces(
+            slip=s, slip_angle=0.0, z=zz, wheel=wheel, soil=soil, gravity_mps2=gravity_mps2
+        ).vertical
+
+    top = vertical(np.full(W.shape, r))
+    if np.any(top < W):
+        k = int(np.argmax(top < W))
+        raise ImmobilizedError(
+            f"load W = {W[k]:.6g} N sinks the wheel (r = {r:g} m) past its axle on "
+            f"{soil.name}: at z = r it carries only {top[k]:.6g} N"
+        )
+    lo = np.zeros(W.shape)
+    hi = np.full(W.shape, r)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        below = vertical(mid) < W
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return np.where(W > 0.0, 0.5 * (lo + hi), 0.0).reshape(shape)
 
 
 # ------------------------------------------------------------ static shear patch (stiction)
@@ -882,12 +1009,14 @@ def static_weight(rolling_speed, *, patch: ShearPatchParams) -> np.ndarray:
 
 
 def drawbar_pull(slip, *, W, wheel: WheelParams, soil: SoilParams) -> np.ndarray:
-    """Drawbar pull DP(s) = H - R_c (N) at Bekker's static sinkage for load ``W`` (N).
+    """Steady drawbar pull DP(s) (N) of a wheel carrying load ``W`` (N): at the sinkage
+    where the vertical load balances ``W`` at that slip (:func:`equilibrium_sinkage`).
 
     Vectorized: ``slip`` and ``W`` broadcast; straight travel (beta = 0), forward.
     """
-    z = static_sinkage(W, wheel=wheel, soil=soil)
-    return wheel_forces(slip=slip, slip_angle=0.0, W=W, z=z, wheel=wheel, soil=soil).drawbar_pull
+    s, W = np.broadcast_arrays(np.asarray(slip, dtype=np.float64), np.asarray(W, dtype=float))
+    z = equilibrium_sinkage(W, wheel=wheel, soil=soil, slip=s)
+    return wheel_forces(slip=s, slip_angle=0.0, z=z, wheel=wheel, soil=soil).drawbar_pull
 
 
 @dataclass(frozen=True)
@@ -895,7 +1024,7 @@ class SlipCurve:
     """Steady straight-line wheel performance vs slip at one load (arrays over ``slip``).
 
     ``slip`` (-), ``thrust``, ``resistance``, ``drawbar_pull`` (N), ``torque`` (N m),
-    ``sinkage`` (m, scalar: Bekker static sinkage for the load), ``load`` (N).
+    ``sinkage`` (m, the equilibrium sinkage at each slip), ``load`` (N).
     """
 
     slip: np.ndarray
@@ -903,14 +1032,15 @@ class SlipCurve:
     resistance: np.ndarray
     drawbar_pull: np.ndarray
     torque: np.ndarray
-    sinkage: float
+    sinkage: np.ndarray
     load: float
 
 
 def slip_vs_drawbar_curve(
     *, W: float, wheel: WheelParams, soil: SoilParams, slip=None
 ) -> SlipCurve:
-    """Thrust, resistance, drawbar pull and torque vs slip for one wheel at load ``W`` (N).
+    """Thrust, resistance, drawbar pull, torque and sinkage vs slip for one wheel at load
+    ``W`` (N), each slip at its own equilibrium sinkage (slip-sinkage included).
 
     ``slip`` defaults to 100 points on [0, 0.99]. For plots of DP/W vs s (cf. the RP
     single-wheel drawbar pull tests the paper's slip plug-in was tuned on).
@@ -919,8 +1049,8 @@ def slip_vs_drawbar_curve(
     if W <= 0.0:
         raise OutOfRangeError(f"W = {W!r} N must be > 0")
     s = np.linspace(0.0, 0.99, 100) if slip is None else np.asarray(slip, dtype=np.float64)
-    z = float(static_sinkage(W, wheel=wheel, soil=soil))
-    f = wheel_forces(slip=s, slip_angle=0.0, W=W, z=z, wheel=wheel, soil=soil)
+    z = equilibrium_sinkage(np.full(s.shape, W), wheel=wheel, soil=soil, slip=s)
+    f = wheel_forces(slip=s, slip_angle=0.0, z=z, wheel=wheel, soil=soil)
     return SlipCurve(
         slip=s,
         thrust=f.thrust,
@@ -930,105 +1060,3 @@ def slip_vs_drawbar_curve(
         sinkage=z,
         load=W,
     )
-
-
-_SLIP_GRID = np.linspace(0.0, 0.99, 100)
-
-
-def _wheel_loads(wheel_loads_N) -> np.ndarray:
-    loads = np.atleast_1d(np.asarray(wheel_loads_N, dtype=np.float64)).ravel()
-    if loads.size == 0 or not np.all(np.isfinite(loads)) or np.any(loads <= 0.0):
-        raise OutOfRangeError(
-            f"wheel_loads_N = {wheel_loads_N!r} must be a non-empty list of finite loads > 0 N"
-        )
-    return loads
-
-
-def reference_slip(
-    *,
-    slope_rad: float,
-    wheel_loads_N,
-    wheel: WheelParams,
-    soil: SoilParams,
-    slope_normal: bool = True,
-) -> float:
-    """Steady-state slip of a rover driving straight up (or down) a uniform slope.
-
-    Solves ``sum_i DP(s, N_i) = sum_i W_i sin(slope)`` for ``s`` where ``W_i`` is the
-    level-ground static load of wheel ``i`` (m_i g, N) and ``N_i = W_i cos(slope)``
-    (``W_i`` if ``slope_normal`` is False). Each wheel sits at its Bekker static sinkage
-    for ``N_i``. Uphill (``slope_rad >= 0``, or a downhill so gentle that rolling
-    resistance still dominates) the root is searched on [0, 0.99]; downhill, where
-    braking is needed, on [-0.99, 0]. The first sign change on a 100-point grid is
-    refined with Brent's method (xtol 1e-10).
-
-    Raises:
-        ImmobilizedError: no slip in the searched interval balances the load (the rover
-            cannot climb the slope, or cannot hold itself on it).
-        OutOfRangeError: slope outside (-pi/2, pi/2) or non-positive loads.
-    """
-    _check("slope_rad", slope_rad, -0.5 * math.pi, 0.5 * math.pi, lo_open=True, hi_open=True)
-    loads = _wheel_loads(wheel_loads_N)
-    normal = loads * math.cos(slope_rad) if slope_normal else loads
-    z = static_sinkage(normal, wheel=wheel, soil=soil)
-    demand = float(np.sum(loads)) * math.sin(slope_rad)
-
-    def excess(s):
-        s = np.asarray(s, dtype=np.float64)
-        f = wheel_forces(
-            slip=s[:, None], slip_angle=0.0, W=normal[None, :], z=z[None, :], wheel=wheel, soil=soil
-        )
-        return np.sum(f.drawbar_pull, axis=1) - demand
-
-    at_zero = float(excess(np.zeros(1))[0])
-    if at_zero == 0.0:
-        return 0.0
-    grid = _SLIP_GRID if at_zero < 0.0 else -_SLIP_GRID
-    g = excess(grid)
-    want = g > 0.0 if at_zero < 0.0 else g < 0.0
-    if not np.any(want):
-        deg = math.degrees(slope_rad)
-        if at_zero < 0.0:
-            raise ImmobilizedError(
-                f"cannot climb slope_rad = {slope_rad!r} ({deg:.2f} deg) on {soil.name}: "
-                f"the best drawbar pull on slip [0, 0.99] is {g.max() + demand:.4g} N but "
-                f"the downslope weight is {demand:.4g} N"
-            )
-        raise ImmobilizedError(
-            f"cannot hold slope_rad = {slope_rad!r} ({deg:.2f} deg) on {soil.name}: the "
-            f"strongest braking on slip [-0.99, 0] is {g.min() + demand:.4g} N but the "
-            f"downslope weight is {demand:.4g} N"
-        )
-    k = int(np.argmax(want))
-    lo, hi = float(grid[k - 1]), float(grid[k])
-    root = brentq(lambda s: float(excess(np.array([s]))[0]), lo, hi, xtol=1e-10, rtol=1e-12)
-    return float(root)
-
-
-def slip_vs_slope_curve(
-    *,
-    slopes_rad,
-    wheel_loads_N,
-    wheel: WheelParams,
-    soil: SoilParams,
-    slope_normal: bool = True,
-) -> np.ndarray:
-    """:func:`reference_slip` at each slope (rad); NaN where the rover is immobilized.
-
-    The model's counterpart of the paper's slip-vs-slope test (Figs 22-24).
-    """
-    out = []
-    for a in np.atleast_1d(np.asarray(slopes_rad, dtype=np.float64)).ravel():
-        try:
-            out.append(
-                reference_slip(
-                    slope_rad=float(a),
-                    wheel_loads_N=wheel_loads_N,
-                    wheel=wheel,
-                    soil=soil,
-                    slope_normal=slope_normal,
-                )
-            )
-        except ImmobilizedError:
-            out.append(math.nan)
-    return np.asarray(out)

@@ -16,7 +16,8 @@ def spawn_pose(
     """Chassis pose that sets the rover on the terrain at (x, y) with heading ``yaw``.
 
     The chassis is pitched/rolled to the plane through the terrain under the four wheel
-    centres and raised so the lowest wheel rests at its static Bekker sinkage.
+    centres and raised so the wheels rest at the sinkage where the Wong-Reece stresses carry the
+    heaviest static wheel load (:func:`~lunar_drake.dynamics.terramechanics.equilibrium_sinkage`).
 
     Raises:
         OutOfBoundsError: a wheel would be off the raster. NoDataError: over a NaN hole.
@@ -44,7 +45,7 @@ def spawn_pose(
     R = RotationMatrix(np.column_stack([fwd, np.cross(n, fwd), n]))
     wheel = tm.WheelParams(radius_m=d.wheel_radius_m, width_m=d.wheel_width_m)
     load = float(np.max(rover.static_wheel_load_N)) if len(rover.static_wheel_load_N) else 0.0
-    sink = float(tm.static_sinkage(load, wheel=wheel, soil=soil)) if load > 0 else 0.0
+    sink = float(tm.equilibrium_sinkage(load, wheel=wheel, soil=soil)) if load > 0 else 0.0
     # Chassis origin above the plane so the wheels touch at static sinkage.
     wc_z = wc[:, 2].min()
     h = -wc_z + d.wheel_radius_m - sink

@@ -1,27 +1,29 @@
-"""Slip versus slope (paper section 6, Figs. 22-24), with the terramechanics reference.
+"""Slip versus slope (paper section 6, Figs. 22-24), against an independent reference.
 
-For each rover, slope and seed: a planar ramp z = x tan(slope) (site frame), the rover
-spawned at its base heading upslope (seed: a small lateral offset and heading error),
-wheels driven at a constant commanded speed after a settling pause. Slip over the
-steady part of the climb (from 10% of the distance to the end) is
+For each rover, slope and seed: a ramp z = x tan(slope) (site frame; planar, or with
+seeded fractal roughness, ``roughness_m``), the rover spawned at its base heading
+upslope (seed: a small lateral offset and heading error, and the roughness), wheels
+driven at a constant commanded speed after a settling pause. Slip over the steady part
+of the climb (from 10% of the distance to the end) is
 
     slip = 1 - ground-truth distance / dead-reckoned distance,
 
 with the ground-truth distance signed along the rover's heading (sliding back gives
-slip > 1),
+slip > 1) and the dead-reckoned distance = mean wheel-encoder angle change x wheel
+radius.
 
-with the dead-reckoned distance = mean wheel-encoder angle change x wheel radius.
-``reference_slip`` is the steady-state slip at which the terramechanics drawbar pull
-balances the downslope weight for the same wheel loads and soil
-(:func:`lunar_drake.dynamics.terramechanics.reference_slip`), computed by the core
-independently of the driving simulation. The wheel loads are the static normal loads
-on the slope, read with the rover at rest and braked on the ramp during the settling
-pause (so the front-to-rear load transfer of the suspension is included; the braking
-force at rest equals the traction of a steady climb); level-ground loads are recorded
-too. params.json holds both, with the soil and wheel, so anyone can recompute it.
-Where no slip below 0.99 balances it (the rover cannot climb), the reference is 1
-(wheels spin out) and ``immobilized`` is true; the simulated rover then slides back
-(slip > 1).
+``reference_slip`` is the steady-state slip of a rigid rover whose wheels, each at its
+own equilibrium sinkage, pull exactly the downslope weight
+(:func:`lunar_drake.dynamics.wheel_reference.reference_slip`: the same Wong-Reece wheel
+as the simulation, written separately with adaptive quadrature and root finding, so
+agreement with it tests the dynamic simulation). It is fed with the static normal
+wheel loads on the slope, read with the rover at rest and braked on the ramp during
+the settling pause (the front-to-rear load transfer of the suspension included; at
+rest the braking force equals the traction of a steady climb); level-ground loads are
+recorded too. params.json holds both, with the soil and wheel, so anyone can recompute
+it. Where no slip below 0.99 balances the weight, the reference says the rover cannot
+climb: ``reference_slip`` is 1 (wheels spin out) and ``immobilized`` is true; the
+simulated rover then slides back (slip > 1) or stalls.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.dynamics.soil_io import load_soil
 from lunar_drake.errors import ConfigError, OutOfRangeError, SimulationError
 from lunar_drake.files import atomic_path, atomic_write_text, ensure_output_dir
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
@@ -72,6 +75,7 @@ class SlipCase:
     soil: str = "lunar_regolith"
     time_step_s: float = 0.01
     settle_s: float = 2.0
+    roughness_m: float = 0.0
 
     def __post_init__(self):
         if self.rover not in (*ROVER_CHOICES, *ROVER_CHOICES.values()):
@@ -84,10 +88,9 @@ class SlipCase:
             raise OutOfRangeError(f"distance_m = {self.distance_m!r}; allowed [0.2, 1000] m")
         if not 0.01 <= self.speed_mps <= 2.0:
             raise OutOfRangeError(f"speed_mps = {self.speed_mps!r}; allowed [0.01, 2] m/s")
-        if self.soil not in tm.SOIL_PRESETS:
-            raise ConfigError(
-                f"soil = {self.soil!r} is unknown; choose one of {sorted(tm.SOIL_PRESETS)}"
-            )
+        load_soil(self.soil)  # a preset name or a soil YAML file; raises ConfigError
+        if not 0.0 <= self.roughness_m <= 0.2:
+            raise OutOfRangeError(f"roughness_m = {self.roughness_m!r}; allowed [0, 0.2] m")
 
 
 def _description(rover: str):
@@ -96,24 +99,51 @@ def _description(rover: str):
     return rover_preset(ROVER_CHOICES.get(rover, rover))
 
 
+ROUGHNESS_HURST = 0.8
+"""Hurst exponent of the ramp roughness (lunar terrain: ~0.7-0.95, Rosenburg et al. 2011)."""
+
+
 def ramp_heightfield(
-    *, slope_deg: float, length_m: float, width_m: float = 8.0, resolution_m: float = 0.05
+    *,
+    slope_deg: float,
+    length_m: float,
+    width_m: float = 8.0,
+    resolution_m: float = 0.05,
+    roughness_m: float = 0.0,
+    seed: int = 0,
 ):
     """A planar ramp z = x tan(slope) (site frame), ``length_m`` + 14 m long: the rover
-    starts :data:`RAMP_START_M` inside the west (downslope) edge."""
+    starts :data:`RAMP_START_M` inside the west (downslope) edge.
+
+    ``roughness_m`` > 0 adds a seeded fractal surface (fBm, Hurst
+    :data:`ROUGHNESS_HURST`, spectral synthesis by
+    :func:`~lunar_drake.terrain.fractal.coarse_fractal`) whose RMS height deviation at a
+    1 m baseline is ``roughness_m`` (Shepard et al. 2001's definition, the one the site
+    synthesis uses): seeds then differ the way test lanes do.
+    """
     from lunar_drake.terrain.heightfield import Heightfield
 
     nc = math.ceil((length_m + RAMP_START_M + 6.0) / resolution_m)
     nr = math.ceil(width_m / resolution_m)
     x = (np.arange(nc) + 0.5 - 0.5 * nc) * resolution_m
-    z = np.tile((x * math.tan(math.radians(slope_deg))).astype(np.float32), (nr, 1))
-    return Heightfield.from_array(z, resolution_m=resolution_m)
+    z = np.tile(x * math.tan(math.radians(slope_deg)), (nr, 1))
+    if roughness_m > 0.0:
+        from lunar_drake.terrain.fractal import FractalParams, coarse_fractal
+
+        params = FractalParams(hurst=ROUGHNESS_HURST, rms_deviation_m=roughness_m)
+        g = rng.generator(seed, "slip_study/roughness")
+        z = z + coarse_fractal((nr, nc), resolution_m=resolution_m, rng=g, params=params)
+    return Heightfield.from_array(z.astype(np.float32), resolution_m=resolution_m)
 
 
 def reference_for(case: SlipCase, *, wheel_loads_N, wheel, soil) -> tuple[float, bool]:
-    """(reference slip, immobilized) for a case."""
+    """(reference slip, immobilized) for a case, from the independent steady-state wheel
+    (:func:`lunar_drake.dynamics.wheel_reference.reference_slip`); ``wheel_loads_N`` are
+    the wheels' normal loads on the slope (N)."""
+    from lunar_drake.dynamics import wheel_reference
+
     try:
-        s = tm.reference_slip(
+        s = wheel_reference.reference_slip(
             slope_rad=math.radians(case.slope_deg),
             wheel_loads_N=wheel_loads_N,
             wheel=wheel,
@@ -138,7 +168,7 @@ def case_scenario(case: SlipCase, *, ramp):
     s = Scenario(name=f"slip {case.rover} {case.slope_deg:g} deg seed {case.seed}")
     s.random_seed = case.seed
     s.simulation_duration = t_end
-    s.soil = tm.soil_preset(case.soil)
+    s.soil = load_soil(case.soil)
     s.rover.description = _description(case.rover)
     s.rover.spawn_x_m = ramp.bounds.left + RAMP_START_M
     s.rover.spawn_y_m = y0
@@ -162,7 +192,12 @@ def run_slip_case(case: SlipCase) -> dict:
     from lunar_drake.simulation import simulate
     from lunar_drake.site import SiteData
 
-    hf = ramp_heightfield(slope_deg=case.slope_deg, length_m=case.distance_m + 2.0)
+    hf = ramp_heightfield(
+        slope_deg=case.slope_deg,
+        length_m=case.distance_m + 2.0,
+        roughness_m=case.roughness_m,
+        seed=case.seed,
+    )
     scenario = case_scenario(case, ramp=hf)
     start = {}
 
@@ -213,10 +248,7 @@ def run_slip_case(case: SlipCase) -> dict:
     # equals the traction; load transfer included).
     rest = (times > case.settle_s - 0.5) & (times <= case.settle_s)
     slope_loads = ws[rest][:, WHEEL_STATE_FIELDS.index("normal_force_N") :: nf].mean(axis=0)
-    cos_t = math.cos(math.radians(case.slope_deg))
-    ref, immobilized = reference_for(
-        case, wheel_loads_N=slope_loads / cos_t, wheel=wheel, soil=soil
-    )
+    ref, immobilized = reference_for(case, wheel_loads_N=slope_loads, wheel=wheel, soil=soil)
     level_loads = level_wheel_loads(desc)
     row = {
         "rover": case.rover,
@@ -242,6 +274,10 @@ def run_slip_case(case: SlipCase) -> dict:
         "gravity_mps2": GRAVITY_MPS2,
         "speed_mps": case.speed_mps,
         "time_step_s": case.time_step_s,
+        "roughness_m": case.roughness_m,
+        "roughness_hurst": ROUGHNESS_HURST,
+        "reference": "lunar_drake.dynamics.wheel_reference.reference_slip with the "
+        "static_wheel_load_on_slope_N of each case (normal loads, N)",
     }
     return {
         "row": row,
@@ -280,19 +316,28 @@ def run_slip_study(
     out_dir,
     soil: str = "lunar_regolith",
     speed_mps: float = 0.1,
+    roughness_m: float = 0.0,
+    data=None,
     workers: int = 1,
     progress: bool = True,
 ) -> list[dict]:
     """Runs every (rover, slope, seed) case and writes slip.csv, params.json and slip.png.
 
     Cases run in parallel processes with dask when ``workers > 1``; results do not depend
-    on the worker count.
+    on the worker count. ``data``: optional measured (slope_deg, slip) arrays drawn on
+    slip.png (e.g. the data a soil was fitted to).
     """
     if seeds < 1:
         raise OutOfRangeError(f"seeds = {seeds!r}; must be >= 1")
     cases = [
         SlipCase(
-            rover=r, slope_deg=s, seed=k, distance_m=distance_m, speed_mps=speed_mps, soil=soil
+            rover=r,
+            slope_deg=s,
+            seed=k,
+            distance_m=distance_m,
+            speed_mps=speed_mps,
+            soil=str(soil),
+            roughness_m=roughness_m,
         )
         for r in rovers
         for s in slopes_deg
@@ -327,7 +372,7 @@ def run_slip_study(
         "method": __doc__.strip(),
     }
     atomic_write_text(out_dir / "params.json", json.dumps(doc, indent=2) + "\n")
-    plot_slip(rows, path=out_dir / "slip.png")
+    plot_slip(rows, path=out_dir / "slip.png", data=data)
     return rows
 
 
@@ -354,24 +399,27 @@ def summarize(rows) -> list[dict]:
     keys = sorted({(r["rover"], r["slope_deg"]) for r in rows})
     for rover, slope in keys:
         s = np.array([r["slip"] for r in rows if r["rover"] == rover and r["slope_deg"] == slope])
-        ref = next(
-            r["reference_slip"] for r in rows if r["rover"] == rover and r["slope_deg"] == slope
-        )
+        first = next(r for r in rows if r["rover"] == rover and r["slope_deg"] == slope)
+        ref = first["reference_slip"]
         out.append(
             {
                 "rover": rover,
                 "slope_deg": slope,
                 "mean": float(s.mean()),
+                "std": float(s.std(ddof=1)) if s.size > 1 else 0.0,
                 "min": float(s.min()),
                 "max": float(s.max()),
                 "reference": ref,
+                "immobilized": bool(first["immobilized"]),
             }
         )
     return out
 
 
-def plot_slip(rows, *, path) -> Path:
-    """slip.png: mean and spread of slip versus slope per rover, with the reference."""
+def plot_slip(rows, *, path, data=None) -> Path:
+    """slip.png: mean and spread of simulated slip versus slope per rover, the independent
+    reference (dashed; a triangle at the top where it says the rover cannot climb) and,
+    if given, measured data (``data``: (slope_deg, slip) arrays, e.g. a slip-fit's input)."""
     from matplotlib.figure import Figure
 
     path = Path(path)
@@ -384,7 +432,8 @@ def plot_slip(rows, *, path) -> Path:
         m = np.array([r["mean"] for r in ss]) * 100
         lo = np.array([r["min"] for r in ss]) * 100
         hi = np.array([r["max"] for r in ss]) * 100
-        ref = np.array([r["reference"] for r in ss]) * 100
+        stuck = np.array([r["immobilized"] for r in ss])
+        ref = np.where(stuck, np.nan, np.array([r["reference"] for r in ss]) * 100)
         color = f"C{k}"
         climb = m <= 100.0
         ax.errorbar(
@@ -405,12 +454,25 @@ def plot_slip(rows, *, path) -> Path:
                 ms=9,
                 label=f"{rover}: simulated, slides back (slip > 100 %)",
             )
-        ax.plot(x, ref, "--", color=color, label=f"{rover}: terramechanics reference")
+        ax.plot(x, ref, "--", color=color, label=f"{rover}: independent steady-state reference")
+        if stuck.any():
+            ax.plot(
+                x[stuck],
+                np.full(stuck.sum(), 103.0),
+                "v",
+                mfc="none",
+                color=color,
+                ms=8,
+                label=f"{rover}: reference says it cannot climb",
+            )
+    if data is not None:
+        dx, dy = (np.asarray(v, dtype=float) for v in data)
+        ax.plot(dx, dy * 100, "s", color="k", ms=4, alpha=0.6, label="measured data")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("slip (%)")
-    ax.set_ylim(0, 105)
+    ax.set_ylim(0, 106)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7)
     ax.set_title("Wheel slip vs slope (planar ramps)")
     fig.tight_layout()
     with atomic_path(path, what="plot") as tmp:

@@ -72,10 +72,12 @@ class _Contact(NamedTuple):
 
 
 class WheelRegolithContact(LeafSystem):
-    """Per-wheel soil contact from the Heightfield: Bekker sinkage and normal force,
-    Wong-Reece/Janosi-Hanamoto traction versus slip, lateral force versus slip angle,
-    compaction resistance, a static shear patch that holds a wheel at rest; plus stiff
-    penalty contact at chassis belly points (rock and belly strikes, from the same raster).
+    """Per-wheel soil contact from the Heightfield: one Wong-Reece wheel per wheel (normal
+    and Janosi-Hanamoto shear stresses over the contact angle give the load carried at
+    the current sinkage and slip, the traction, compaction resistance and torque, and
+    lateral shear plus bulldozing versus slip angle), a static shear patch that holds a
+    wheel at rest; plus stiff penalty contact at chassis belly points (rock and belly
+    strikes, from the same raster).
 
     .. pydrake_system::
 
@@ -90,7 +92,7 @@ class WheelRegolithContact(LeafSystem):
         - off_terrain
 
     Forces are computed from the plant state at the start of each step and held over
-    it (explicit); the soil law is soft enough (Bekker, lunar parameters) that a 5 ms
+    it (explicit); the soil law is soft enough (lunar parameters) that a 5 ms
     step is stable. Each wheel's force acts at its contact point, with a torque that
     sets the soil moment about the axle to the Wong-Reece value. Wheels whose footprint
     leaves the raster (or touches nodata) get no force and raise ``off_terrain`` (1.0),
@@ -301,25 +303,23 @@ class WheelRegolithContact(LeafSystem):
         omega_r = spin * w.radius_m
         slip = tm.slip_ratio(omega_r=omega_r, v=v_x, v_eps=self._v_eps)
         beta = tm.slip_angle(v_x=v_x, v_y=v_y, v_eps=self._v_eps)
-        N = tm.normal_force(z, z_dot, wheel=w, soil=soil) * on
+        # One Wong-Reece evaluation: the vertical load the stresses carry at this sinkage
+        # and slip (the normal force, plus damping) and the tangential forces.
+        f = tm.wheel_forces(
+            slip=slip,
+            slip_angle=beta,
+            z=z,
+            wheel=w,
+            soil=soil,
+            # The soil is compacted by a wheel that translates or spins (digging in when
+            # immobilized): the model follows v + r omega, mirrored when it reverses and
+            # faded out near rest.
+            direction=tm.travel_direction(v_x + omega_r, v_eps=self._dir_eps),
+        )
+        N = tm.normal_force(z, z_dot, vertical=f.vertical, wheel=w, soil=soil) * on
         # Static patch weight: 1 for a wheel that does not roll, 0 at driving speeds (exactly).
         ws = tm.static_weight(omega_r, patch=self._patch)
-        if ws.max() < 1.0:
-            f = tm.wheel_forces(
-                slip=slip,
-                slip_angle=beta,
-                W=N,
-                z=z,
-                wheel=w,
-                soil=soil,
-                # The soil is compacted by a wheel that translates or spins (digging in
-                # when immobilized): the resistance follows v + r omega, faded out near
-                # rest.
-                direction=tm.travel_direction(v_x + omega_r, v_eps=self._dir_eps),
-            )
-            dynamic = (f.drawbar_pull, f.lateral, -f.torque)
-        else:  # no wheel rolls: the Wong-Reece forces have zero weight
-            dynamic = (np.zeros(self._n),) * 3
+        dynamic = (f.drawbar_pull, f.lateral, -f.torque)
         state = np.stack(
             [np.where(on, g.sinkage, 0.0), N, slip, beta, np.zeros(self._n), (~on).astype(float)],
             axis=1,

@@ -1,0 +1,59 @@
+"""Ctrl-C (SIGINT) bookkeeping shared by the CLI and :func:`lunar_drake.simulation.simulate`.
+
+Python raises KeyboardInterrupt at whatever bytecode runs when SIGINT arrives. Inside an
+import callback or a C++ callback that exception can be swallowed ("Exception ignored")
+or turned into another error, and a half-imported extension can fail at interpreter exit.
+So a SIGINT is also *latched* here: whoever installs :func:`raise_and_latch` as the
+handler can later ask :func:`requested` whether Ctrl-C was pressed, whatever became of
+the exception. Main thread only (Python delivers signals there).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+_requested = False
+
+
+def requested() -> bool:
+    """True once a SIGINT reached :func:`raise_and_latch` since the last :func:`clear`."""
+    return _requested
+
+
+def clear() -> None:
+    """Forgets a latched SIGINT."""
+    global _requested
+    _requested = False
+
+
+def raise_and_latch(signum, frame):
+    """SIGINT handler: latches the interrupt, then raises KeyboardInterrupt as Python's
+    default handler does."""
+    global _requested
+    _requested = True
+    raise KeyboardInterrupt
+
+
+class LatchedSigint:
+    """Installs :func:`raise_and_latch` for SIGINT (main thread only; elsewhere a no-op);
+    ``restore()`` puts the previous handler back. The outermost installer owns the latch:
+    its ``restore()`` also clears it (so a notebook's next run starts clean), while a
+    nested one (``simulate()`` under the CLI) leaves it for the owner to see."""
+
+    def __init__(self) -> None:
+        self._installed = threading.current_thread() is threading.main_thread()
+        self._owner = False
+        if self._installed:
+            self._previous = signal.signal(signal.SIGINT, raise_and_latch)
+            self._owner = self._previous is not raise_and_latch
+            if self._owner:
+                clear()
+
+    def restore(self) -> None:
+        if self._installed:
+            previous = self._previous
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+            self._installed = False
+            if self._owner:
+                clear()
