@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lunar_drake.comms.link import DROP_REASONS
 from lunar_drake.scenario import Scenario
 from lunar_drake.simulation import SimulationLogs
 from lunar_drake.site import SiteData
@@ -90,8 +91,8 @@ def localization(logs: SimulationLogs) -> dict:
 
 
 def link_stats(logs: SimulationLogs) -> dict:
-    """Per direction: messages and bytes sent, delivered, still in flight, and the
-    delivery latency (s; min and max)."""
+    """Per direction: messages and bytes offered, delivered, still in flight, dropped
+    (and why), and the delivery latency (s; min and max)."""
     out = {}
     for direction in ("uplink", "downlink"):
         rows = [r for r in logs.link if r.direction == direction]
@@ -101,8 +102,11 @@ def link_stats(logs: SimulationLogs) -> dict:
             "messages": len(rows),
             "bytes": int(sum(r.bytes for r in rows)),
             "delivered": len(got),
-            "in_flight_at_end": len(rows) - len(got),
+            "in_flight_at_end": sum(1 for r in rows if not r.dropped) - len(got),
             "dropped": sum(1 for r in rows if r.dropped),
+            "dropped_by_reason": {
+                k: n for k in DROP_REASONS if (n := sum(1 for r in rows if r.reason == k))
+            },
             "latency_s": [_r(min(lat)), _r(max(lat))] if lat else None,
         }
     return out

@@ -241,11 +241,36 @@ class GroundConfig:
 
 
 @dc.dataclass
+class LineOfSightConfig:
+    """Direct-to-Earth line of sight (:class:`~lunar_drake.systems.earth_line_of_sight.
+    EarthLineOfSight`): while the Earth is below the terrain horizon at the rover's
+    antenna, both links lose every message (``no_line_of_sight``).
+
+    Attributes:
+        enabled: model it (False: always in view, e.g. through a relay orbiter).
+        period_s: how often the horizon is checked (s), (0, 600].
+        antenna_height_m: antenna above the chassis origin (m), [0, 10].
+        min_margin_deg: the Earth's centre must clear the horizon by this much (deg).
+    """
+
+    enabled: bool = True
+    period_s: float = 1.0
+    antenna_height_m: float = 1.0
+    min_margin_deg: float = 0.0
+
+    def validate(self) -> None:
+        check_range("period_s", self.period_s, 0.0, 600.0, lo_open=True, unit=" s")
+        check_range("antenna_height_m", self.antenna_height_m, 0.0, 10.0, unit=" m")
+        check_range("min_margin_deg", self.min_margin_deg, -90.0, 90.0, unit=" deg")
+
+
+@dc.dataclass
 class CommsConfig:
-    """The Earth-Moon link, one config per direction."""
+    """The Earth-Moon link, one config per direction, and the line of sight to Earth."""
 
     uplink: LinkConfig = dc.field(default_factory=LinkConfig)
     downlink: LinkConfig = dc.field(default_factory=LinkConfig)
+    line_of_sight: LineOfSightConfig = dc.field(default_factory=LineOfSightConfig)
 
 
 @dc.dataclass
@@ -361,6 +386,7 @@ def validate_scenario(s: Scenario) -> None:
     _validate_route(s)
     _section("comms.uplink", s.comms.uplink.validate)
     _section("comms.downlink", s.comms.downlink.validate)
+    _section("comms.line_of_sight", s.comms.line_of_sight.validate)
     check_range("logging.period_s", s.logging.period_s, 0.0, 100.0, lo_open=True, unit=" s")
     check_range(
         "simulator_config.max_step_size",

@@ -87,8 +87,13 @@ def test_flight_reads_only_sensors_and_the_uplink(mission):
 def test_ground_reads_only_the_downlink(mission):
     diagram, _ = mission
     assert _sources(diagram, "ground") == {"downlink.telemetry": ("downlink", "telemetry")}
-    assert _sources(diagram, "uplink") == {"commands": ("ground", "uplink.commands")}
-    assert _sources(diagram, "downlink") == {"telemetry": ("flight", "downlink.telemetry")}
+    # The links read their producers and, for loss of signal, the plant's radio path.
+    radio = {"earth_visible": ("plant", "radio.earth_visible")}
+    assert _sources(diagram, "uplink") == {"commands": ("ground", "uplink.commands"), **radio}
+    assert _sources(diagram, "downlink") == {
+        "telemetry": ("flight", "downlink.telemetry"),
+        **radio,
+    }
 
 
 def test_truth_feeds_nothing_inside_the_mission(mission):
@@ -96,10 +101,10 @@ def test_truth_feeds_nothing_inside_the_mission(mission):
     plant = diagram.GetSubsystemByName("plant")
     for (dst, k), (src, j) in diagram.connection_map().items():
         if src is plant:
-            assert not src.get_output_port(j).get_name().startswith("truth."), (
-                dst.get_name(),
-                dst.get_input_port(k).get_name(),
-            )
+            name = src.get_output_port(j).get_name()
+            assert not name.startswith("truth."), (dst.get_name(), dst.get_input_port(k).get_name())
+            if name.startswith("radio."):  # radio physics feeds only the link model
+                assert dst.get_name() in ("uplink", "downlink"), dst.get_name()
     # ... and the plant's only inputs are the actuator commands, from flight.
     assert {p: s for p, s in _sources(diagram, "plant").items()} == {
         name: ("flight", name)

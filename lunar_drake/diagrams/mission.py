@@ -18,9 +18,11 @@ from __future__ import annotations
 
 from pydrake.systems.framework import DiagramBuilder
 
+from lunar_drake.comms.light_time import light_time_s
 from lunar_drake.diagrams.flight import MakeFlightDiagram
 from lunar_drake.diagrams.ground import MakeGroundDiagram
 from lunar_drake.diagrams.plant import MakePlantDiagram
+from lunar_drake.ephemeris.sun_earth import SiteLocation
 from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.link import Link
@@ -35,12 +37,21 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     )
     flight = builder.AddNamedSystem("flight", MakeFlightDiagram(scenario=scenario))
     ground = builder.AddNamedSystem("ground", MakeGroundDiagram(scenario=scenario))
+    light = None
+    if scenario.comms.uplink.delay_s is None or scenario.comms.downlink.delay_s is None:
+        light = light_time_s(
+            site=SiteLocation(scenario.site.latitude_deg, scenario.site.longitude_deg),
+            epoch_utc=scenario.site.epoch_utc,
+            extra_kernels=scenario.lighting.extra_kernels,
+        )
     uplink = builder.AddNamedSystem(
         "uplink",
         Link(
             direction="uplink",
             topics={"commands": 1.0 / scenario.ground.rate_hz},
             config=scenario.comms.uplink,
+            seed=scenario.random_seed,
+            light_time_s=light,
         ),
     )
     downlink = builder.AddNamedSystem(
@@ -49,6 +60,8 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
             direction="downlink",
             topics={"telemetry": 1.0 / scenario.flight.telemetry_rate_hz},
             config=scenario.comms.downlink,
+            seed=scenario.random_seed,
+            light_time_s=light,
         ),
     )
     # Sensors to flight; flight's actuator commands to the plant.
@@ -64,6 +77,9 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     builder.Connect(uplink.outputs["commands"], flight.GetInputPort("uplink.commands"))
     builder.Connect(flight.GetOutputPort("downlink.telemetry"), downlink.inputs["telemetry"])
     builder.Connect(downlink.outputs["telemetry"], ground.GetInputPort("downlink.telemetry"))
+    if plant.HasOutputPort("radio.earth_visible"):  # loss of signal behind terrain
+        for link in (uplink, downlink):
+            builder.Connect(plant.GetOutputPort("radio.earth_visible"), link.earth_visible_input)
     # Exports for scoring, logging and displays.
     for k in range(plant.num_output_ports()):
         port = plant.get_output_port(k)

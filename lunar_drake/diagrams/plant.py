@@ -37,6 +37,7 @@ from lunar_drake.models.spawn import spawn_pose
 from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.body_pose_vector import BodyPoseVector
+from lunar_drake.systems.earth_line_of_sight import EarthLineOfSight
 from lunar_drake.systems.energy_meter import EnergyMeter
 from lunar_drake.systems.ephemeris_source import EphemerisSource
 from lunar_drake.systems.imu import Imu
@@ -138,6 +139,22 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     _add_actuators(builder, plant=plant, rover=rover, time_step_s=scenario.plant_config.time_step)
     _add_sensors(builder, scenario=scenario, plant=plant, rover=rover)
     _add_truth(builder, plant=plant, rover=rover, contact=contact)
+    if scenario.comms.line_of_sight.enabled:
+        los_cfg = scenario.comms.line_of_sight
+        los = builder.AddNamedSystem(
+            "radio.line_of_sight",
+            EarthLineOfSight(
+                heightfield=hf,
+                period_s=los_cfg.period_s,
+                antenna_height_m=los_cfg.antenna_height_m,
+                min_margin_deg=los_cfg.min_margin_deg,
+            ),
+        )
+        builder.Connect(ephem.GetOutputPort("earth_direction_W"), los.earth_direction_input)
+        pose_sys = builder.GetSubsystemByName("rover.truth")
+        builder.Connect(pose_sys.pose_output, los.pose_input)
+        builder.ExportOutput(los.earth_visible_output, "radio.earth_visible")
+        builder.ExportOutput(los.earth_margin_output, "truth.earth_margin_deg")
     if scenario.sensors.camera.enabled:
         _add_cameras(
             builder,

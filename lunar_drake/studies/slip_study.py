@@ -179,6 +179,7 @@ def case_scenario(case: SlipCase, *, ramp):
     ]
     s.comms.uplink.delay_s = 0.0
     s.comms.downlink.delay_s = 0.0
+    s.comms.line_of_sight.enabled = False  # a test lane, not a site: no horizon to model
     s.logging.period_s = 0.05
     s.plant_config.time_step = case.time_step_s
     return s
