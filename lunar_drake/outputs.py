@@ -34,6 +34,7 @@ LOG_FILES = {
     "flight.brake_command": "brakes.csv",
     "flight.status": "flight_status.csv",
     "flight.pose_estimate": "pose_estimate.csv",
+    "flight.pose_covariance": "pose_covariance.csv",
 }
 
 

@@ -30,6 +30,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
+from lunar_drake.autonomy.ekf import EstimatorConfig
 from lunar_drake.comms.link import LinkConfig
 from lunar_drake.dynamics.terramechanics import SoilParams
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
@@ -193,12 +194,15 @@ class FlightConfig:
             (s); they are on from the start.
         telemetry_rate_hz: rate of the housekeeping telemetry sent down (Hz).
         gimbal: mast camera pointing.
+        estimator: the on-board EKF's assumptions
+            (:class:`~lunar_drake.autonomy.ekf.EstimatorConfig`).
     """
 
     rate_hz: float = 50.0
     brake_delay_s: float = 0.5
     telemetry_rate_hz: float = 1.0
     gimbal: GimbalPointingConfig = dc.field(default_factory=GimbalPointingConfig)
+    estimator: EstimatorConfig = dc.field(default_factory=EstimatorConfig)
 
 
 @dc.dataclass
@@ -382,6 +386,7 @@ def validate_scenario(s: Scenario) -> None:
     check_range("flight.brake_delay_s", f.brake_delay_s, 0.0, 60.0, unit=" s")
     check_range("flight.telemetry_rate_hz", f.telemetry_rate_hz, 0.001, 100.0, unit=" Hz")
     _section("flight.gimbal", f.gimbal.validate)
+    _section("flight.estimator", f.estimator.validate)
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
     _section("comms.uplink", s.comms.uplink.validate)

@@ -46,6 +46,12 @@ LOGGED_PORTS = {
     "flight.brake_command": ("brake",),
     "flight.status": ("mode", "command_seq"),
     "flight.pose_estimate": ("x_m", "y_m", "z_rel_m", "roll_rad", "pitch_rad", "yaw_rad"),
+    # Row-major 6 x 6 covariance of [position (m), world-frame attitude error (rad)].
+    "flight.pose_covariance": tuple(
+        f"cov_{a}_{b}"
+        for a in ("x", "y", "z", "rx", "ry", "rz")
+        for b in ("x", "y", "z", "rx", "ry", "rz")
+    ),
 }
 
 

@@ -8,10 +8,12 @@ Wiring only. Ports (``<subsystem>.<signal>``):
   ``rover.steer_angle_command`` (explicit steer), ``rover.gimbal_command``,
   ``rover.brake_command``; the downlink outbox ``downlink.telemetry``; and the on-board
   records ``flight.twist_command``, ``flight.brake_command``, ``flight.pose_estimate``,
-  ``flight.status`` (for logging).
+  ``flight.pose_covariance``, ``flight.status`` (for logging).
 """
 
 from __future__ import annotations
+
+import math
 
 from pydrake.systems.framework import DiagramBuilder
 
@@ -19,8 +21,8 @@ from lunar_drake.scenario import Scenario
 from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
 from lunar_drake.systems.rover_kinematics import RoverKinematics
+from lunar_drake.systems.state_estimator import StateEstimator
 from lunar_drake.systems.telemetry import TelemetryPacketizer
-from lunar_drake.systems.wheel_odometry import WheelOdometry
 
 #: Inputs the flight software reads: plant sensors and the uplink.
 FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "uplink.commands")
@@ -28,9 +30,9 @@ FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "upl
 
 def MakeFlightDiagram(*, scenario: Scenario):
     """Builds the flight-software diagram (named ``flight``): the command executor (runs
-    the uplinked drive commands, brakes when parked), the rover kinematics, wheel
-    odometry with star-tracker attitude propagated by the IMU gyro between fixes (the
-    on-board pose estimate), gimbal pointing
+    the uplinked drive commands, brakes when parked), the rover kinematics, the on-board
+    EKF (wheel odometry, IMU gyro and accelerometer, star tracker: pose with
+    covariance), gimbal pointing
     (from the estimate and commands, never truth) and the telemetry packetizer.
 
     It knows the rover only from ``scenario.rover.description`` and the start point
@@ -46,11 +48,12 @@ def MakeFlightDiagram(*, scenario: Scenario):
         "flight.kinematics", RoverKinematics(description=d, rate_hz=f.rate_hz)
     )
     odometry = builder.AddNamedSystem(
-        "flight.odometry",
-        WheelOdometry(
+        "flight.estimator",
+        StateEstimator(
             description=d,
-            rate_hz=f.rate_hz,
+            config=f.estimator,
             start_xy_m=(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m),
+            start_yaw_rad=math.radians(scenario.rover.spawn_yaw_deg),
         ),
     )
     gimbal = builder.AddNamedSystem(
@@ -79,6 +82,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
     builder.ExportOutput(telemetry.telemetry_output, "downlink.telemetry")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")
     builder.ExportOutput(odometry.pose_estimate_output, "flight.pose_estimate")
+    builder.ExportOutput(odometry.pose_covariance_output, "flight.pose_covariance")
     builder.ExportOutput(executor.brake_output, "flight.brake_command")
     builder.ExportOutput(executor.status_output, "flight.status")
     diagram = builder.Build()
