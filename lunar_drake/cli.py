@@ -229,6 +229,30 @@ def _cmd_synth(args) -> int:
     return 0
 
 
+def _cmd_plan(args) -> int:
+    from lunar_drake.plan_cli import run_plan
+    from lunar_drake.scenario_files import apply_overrides, load_scenario
+    from lunar_drake.site import load_site
+
+    filename, name = _split_scenario(args.scenario)
+    scenario = load_scenario(
+        filename=filename, scenario_name=name, scenario_text=args.scenario_text
+    )
+    if args.map is not None:
+        scenario = apply_overrides(scenario, f"{{ground: {{map: {{source: {args.map}}}}}}}")
+    site = load_site(scenario, progress=not args.no_progress)
+    doc = run_plan(
+        scenario=scenario, site=site, goal_xy=args.goal, start_xy=args.start, out_dir=args.out
+    )
+    print(
+        f"Path on the {doc['map']} map: {doc['length_m']:.1f} m (straight line "
+        f"{doc['straight_line_m']:.1f} m), {doc['waypoints']} waypoints; "
+        f"{100 * doc['lethal_fraction']:.1f}% of the map is hazard"
+    )
+    print(f"Outputs: {Path(args.out).resolve()} (plan.png, path.csv, plan.json)")
+    return 0
+
+
 def _cmd_render(args) -> int:
     from lunar_drake.render_cli import render_stereo
     from lunar_drake.scenario_files import load_scenario
@@ -411,6 +435,19 @@ def build_parser() -> argparse.ArgumentParser:
     rd.add_argument("--out", required=True, help="output directory")
     rd.add_argument("--no-progress", action="store_true")
     rd.set_defaults(func=_cmd_render)
+
+    pn = sub.add_parser("plan", help="plan a hazard-free path on the ground's map of a site")
+    pn.add_argument("--scenario", default="default", help="scenario name or FILE.yaml[:NAME]")
+    pn.add_argument("--scenario-text", default="{}", help="YAML overrides")
+    pn.add_argument("--goal", type=float, nargs=2, required=True, metavar=("X", "Y"),
+                    help="goal in the site frame (m)")  # fmt: skip
+    pn.add_argument("--start", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                    help="start (m; default: the rover's spawn point)")  # fmt: skip
+    pn.add_argument("--map", choices=["truth", "orbital"], default=None,
+                    help="the a-priori map (default: scenario ground.map.source)")  # fmt: skip
+    pn.add_argument("--out", required=True, help="output directory")
+    pn.add_argument("--no-progress", action="store_true")
+    pn.set_defaults(func=_cmd_plan)
 
     t = sub.add_parser("terrain", help="terrain tools")
     tsub = t.add_subparsers(dest="terrain_command", required=True)

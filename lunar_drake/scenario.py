@@ -30,6 +30,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 from pydrake.visualization import VisualizationConfig
 
+from lunar_drake.autonomy.costmap import HazardConfig, MapConfig
 from lunar_drake.autonomy.ekf import EstimatorConfig
 from lunar_drake.comms.link import LinkConfig
 from lunar_drake.dynamics.terramechanics import SoilParams
@@ -238,10 +239,15 @@ class GroundConfig:
         rate_hz: tick of the ground software (Hz); one command is sent per tick.
         route: the operator's drive commands, sent in order from t = 0 and run one
             after the other on board.
+        map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
+        hazards: how the map becomes a costmap
+            (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
     """
 
     rate_hz: float = 10.0
     route: list[RouteSegment] = dc.field(default_factory=_default_route)
+    map: MapConfig = dc.field(default_factory=MapConfig)
+    hazards: HazardConfig = dc.field(default_factory=HazardConfig)
 
 
 @dc.dataclass
@@ -389,6 +395,8 @@ def validate_scenario(s: Scenario) -> None:
     _section("flight.estimator", f.estimator.validate)
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
+    _section("ground.map", s.ground.map.validate)
+    _section("ground.hazards", s.ground.hazards.validate)
     _section("comms.uplink", s.comms.uplink.validate)
     _section("comms.downlink", s.comms.downlink.validate)
     _section("comms.line_of_sight", s.comms.line_of_sight.validate)

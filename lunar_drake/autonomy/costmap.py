@@ -1,0 +1,283 @@
+"""Hazard costmap for ground planning: slope, step height and roughness from a DEM,
+lethal cells inflated by the rover's footprint. Pure numpy/scipy; no Drake.
+
+From a DEM ``z`` (m, row 0 north, pixel ``res`` m):
+
+* **slope** (deg): the gradient of the DEM smoothed over a box of ``baseline_m`` (about
+  the wheelbase: what tilts the chassis);
+* **step** (m): max - min, within ``step_window_m`` (about a wheel's footprint), of
+  the DEM minus its smoothed surface: rocks and edges a wheel must climb, apart from the
+  slope it is on (a plane has no steps);
+* **roughness** (m): RMS of the DEM minus its smoothed surface within ``baseline_m``.
+
+Each layer is reduced to the planning grid (``resolution_m``) by its maximum over the
+block (conservative). A cell is *lethal* when slope > ``max_slope_deg`` or step >
+``max_step_m``; lethal cells are inflated by the rover's footprint radius (a cell within
+that distance of a lethal one is lethal: the rover's centre must stay that far from
+hazards). Free cells cost ``1 + slope_weight (slope / max_slope)^2 + roughness_weight
+(roughness / max_roughness)^2`` per metre; lethal ones ``inf``.
+
+:func:`orbital_dem` gives the map a mission would have from orbit: the DEM averaged over
+blocks of ``orbital_resolution_m`` (rocks vanish, craters stay) plus seeded noise.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
+
+import dataclasses as dc
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from lunar_drake import rng
+from lunar_drake.errors import ConfigError, check_range
+
+
+@dc.dataclass
+class HazardConfig:
+    """How the ground turns a map into a costmap (see the module docstring).
+
+    Attributes:
+        resolution_m: planning grid (m), (0, 50].
+        max_slope_deg: steepest traversable slope (deg); default 14, what both rovers
+            climb on lunar regolith in the slip study (the skid rover spins out at 16).
+        max_step_m: tallest step the wheels may meet (m); 0 = half the smaller of the
+            wheel radius and the belly clearance.
+        max_roughness_m: roughness that doubles a cell's cost (m), > 0.
+        baseline_m: smoothing baseline of slope and roughness (m); 0 = the wheelbase.
+        step_window_m: window of the step height (m); 0 = the wheel diameter.
+        slope_weight, roughness_weight: cost weights (-), >= 0.
+        inflation_m: extra margin added to the footprint radius (m), >= 0.
+    """
+
+    resolution_m: float = 0.5
+    max_slope_deg: float = 14.0
+    max_step_m: float = 0.0
+    max_roughness_m: float = 0.05
+    baseline_m: float = 0.0
+    step_window_m: float = 0.0
+    slope_weight: float = 2.0
+    roughness_weight: float = 1.0
+    inflation_m: float = 0.2
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
+        check_range("resolution_m", self.resolution_m, 0.0, 50.0, lo_open=True, unit=" m")
+        check_range("max_slope_deg", self.max_slope_deg, 0.0, 60.0, lo_open=True, unit=" deg")
+        check_range("max_step_m", self.max_step_m, 0.0, 5.0, unit=" m")
+        check_range("max_roughness_m", self.max_roughness_m, 0.0, 5.0, lo_open=True, unit=" m")
+        check_range("baseline_m", self.baseline_m, 0.0, 50.0, unit=" m")
+        check_range("step_window_m", self.step_window_m, 0.0, 10.0, unit=" m")
+        check_range("slope_weight", self.slope_weight, 0.0, 1e6)
+        check_range("roughness_weight", self.roughness_weight, 0.0, 1e6)
+        check_range("inflation_m", self.inflation_m, 0.0, 50.0, unit=" m")
+
+
+MAP_SOURCES = ("truth", "orbital")
+
+
+@dc.dataclass
+class MapConfig:
+    """The ground's a-priori map.
+
+    Attributes:
+        source: ``truth`` (the site DEM, rocks included: an oracle for testing control
+            and the link) or ``orbital`` (the DEM averaged to ``orbital_resolution_m``
+            plus seeded noise: rocks vanish, craters stay, as in orbital data).
+        orbital_resolution_m: orbital DEM pixel (m). orbital_noise_m: its noise (m).
+        margin_m: map margin around the start and the goal (m).
+    """
+
+    source: str = "truth"
+    orbital_resolution_m: float = 1.0
+    orbital_noise_m: float = 0.05
+    margin_m: float = 20.0
+
+    def validate(self) -> None:
+        if self.source not in MAP_SOURCES:
+            raise ConfigError(f"source = {self.source!r} is unknown; choose one of {MAP_SOURCES}")
+        check_range("orbital_resolution_m", self.orbital_resolution_m, 0.01, 1e4, unit=" m")
+        check_range("orbital_noise_m", self.orbital_noise_m, 0.0, 100.0, unit=" m")
+        check_range("margin_m", self.margin_m, 0.0, 1e5, unit=" m")
+
+
+@dc.dataclass(frozen=True)
+class RoverEnvelope:
+    """What the costmap needs of a rover (m): footprint radius (centre to the farthest
+    wheel edge), wheelbase, wheel radius and belly clearance."""
+
+    footprint_radius_m: float
+    wheelbase_m: float
+    wheel_radius_m: float
+    ground_clearance_m: float
+
+    @classmethod
+    def of(cls, description) -> "RoverEnvelope":
+        """From a :class:`~lunar_drake.models.rover_description.RoverDescription`."""
+        half_l = 0.5 * description.wheelbase_m + description.wheel_radius_m
+        half_w = 0.5 * description.track_m + 0.5 * description.wheel_width_m
+        half_l = max(half_l, 0.5 * description.chassis_length_m)
+        half_w = max(half_w, 0.5 * description.chassis_width_m)
+        return cls(
+            footprint_radius_m=math.hypot(half_l, half_w),
+            wheelbase_m=description.wheelbase_m,
+            wheel_radius_m=description.wheel_radius_m,
+            ground_clearance_m=description.ground_clearance_m,
+        )
+
+
+@dc.dataclass(frozen=True)
+class Costmap:
+    """A planning grid. ``cost`` (rows, cols): cost per metre (>= 1; ``inf`` lethal), row
+    0 north; ``slope_deg``, ``step_m``, ``roughness_m`` the layers; ``x0_m``, ``y1_m``:
+    site coordinates of the grid's west and north edges; ``resolution_m``."""
+
+    cost: np.ndarray
+    slope_deg: np.ndarray
+    step_m: np.ndarray
+    roughness_m: np.ndarray
+    lethal_raw: np.ndarray
+    x0_m: float
+    y1_m: float
+    resolution_m: float
+
+    @property
+    def shape(self) -> tuple:
+        return self.cost.shape
+
+    def cell_of(self, x_m: float, y_m: float) -> tuple:
+        """(row, col) of a site point; may lie outside the grid."""
+        col = math.floor((x_m - self.x0_m) / self.resolution_m)
+        row = math.floor((self.y1_m - y_m) / self.resolution_m)
+        return row, col
+
+    def centre_of(self, row, col) -> tuple:
+        """Site (x, y) (m) of cell centres."""
+        x = self.x0_m + (np.asarray(col) + 0.5) * self.resolution_m
+        y = self.y1_m - (np.asarray(row) + 0.5) * self.resolution_m
+        return x, y
+
+    def inside(self, row: int, col: int) -> bool:
+        return 0 <= row < self.cost.shape[0] and 0 <= col < self.cost.shape[1]
+
+
+def _block_max(a: np.ndarray, k: int) -> np.ndarray:
+    r, c = (a.shape[0] // k) * k, (a.shape[1] // k) * k
+    return a[:r, :c].reshape(r // k, k, c // k, k).max(axis=(1, 3))
+
+
+def _block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    r, c = (a.shape[0] // k) * k, (a.shape[1] // k) * k
+    return a[:r, :c].reshape(r // k, k, c // k, k).mean(axis=(1, 3))
+
+
+def hazard_layers(z, *, resolution_m: float, baseline_m: float, step_window_m: float):
+    """(slope_deg, step_m, roughness_m) on the DEM's own grid (module docstring)."""
+    z = np.asarray(z, dtype=np.float64)
+    if not np.isfinite(z).all():
+        raise ConfigError("the map holds nodata (NaN) cells; fill or crop them before planning")
+    # Odd windows: centred on each pixel (an even box would shift the smoothed surface
+    # by half a pixel and read a plane as rough).
+    nb = 2 * (round(baseline_m / resolution_m) // 2) + 1
+    ns = 2 * (round(step_window_m / resolution_m) // 2) + 1
+    smooth = ndimage.uniform_filter(z, size=nb, mode="nearest")
+    gy, gx = np.gradient(smooth, resolution_m)
+    slope = np.degrees(np.arctan(np.hypot(gx, gy)))
+    resid = z - smooth
+    step = ndimage.maximum_filter(resid, size=ns, mode="nearest") - ndimage.minimum_filter(
+        resid, size=ns, mode="nearest"
+    )
+    rough = np.sqrt(np.maximum(ndimage.uniform_filter(resid * resid, size=nb, mode="nearest"), 0.0))
+    return slope, step, rough
+
+
+def build_costmap(
+    z, *, resolution_m: float, x0_m: float, y1_m: float, rover: RoverEnvelope, config: HazardConfig
+) -> Costmap:
+    """The costmap of a DEM ``z`` (m; pixel ``resolution_m``; west edge ``x0_m``, north
+    edge ``y1_m``) for ``rover`` (module docstring)."""
+    config.validate()
+    baseline = config.baseline_m or rover.wheelbase_m
+    window = config.step_window_m or 2.0 * rover.wheel_radius_m
+    max_step = config.max_step_m or 0.5 * min(rover.wheel_radius_m, rover.ground_clearance_m)
+    slope, step, rough = hazard_layers(
+        z, resolution_m=resolution_m, baseline_m=baseline, step_window_m=window
+    )
+    k = max(1, round(config.resolution_m / resolution_m))
+    slope, step, rough = (_block_max(a, k) for a in (slope, step, rough))
+    res = resolution_m * k
+    lethal = (slope > config.max_slope_deg) | (step > max_step)
+    radius = rover.footprint_radius_m + config.inflation_m
+    if lethal.any():
+        dist = ndimage.distance_transform_edt(~lethal) * res
+        inflated = dist <= radius
+    else:
+        inflated = lethal
+    cost = (
+        1.0
+        + config.slope_weight * (slope / config.max_slope_deg) ** 2
+        + config.roughness_weight * (rough / config.max_roughness_m) ** 2
+    )
+    cost = np.where(inflated, np.inf, cost)
+    return Costmap(
+        cost=cost,
+        slope_deg=slope,
+        step_m=step,
+        roughness_m=rough,
+        lethal_raw=lethal,
+        x0_m=float(x0_m),
+        y1_m=float(y1_m),
+        resolution_m=res,
+    )
+
+
+def orbital_dem(z, *, resolution_m: float, orbital_resolution_m: float, noise_m: float,
+                seed: int) -> tuple:  # fmt: skip
+    """(DEM, pixel size): ``z`` averaged over blocks of ``orbital_resolution_m`` (an
+    orbital DEM: rocks vanish, craters stay) plus seeded white noise of ``noise_m`` (m,
+    1 sigma)."""
+    check_range("orbital_resolution_m", orbital_resolution_m, resolution_m, 1e4, unit=" m")
+    check_range("noise_m", noise_m, 0.0, 100.0, unit=" m")
+    k = max(1, round(orbital_resolution_m / resolution_m))
+    coarse = _block_mean(np.asarray(z, np.float64), k)
+    g = rng.generator(seed, "ground/orbital_map")
+    return coarse + g.normal(0.0, noise_m, coarse.shape), resolution_m * k
+
+
+def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
+                     map_config: MapConfig, seed: int) -> Costmap:  # fmt: skip
+    """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
+    ``heightfield``: the raster window covering them plus ``map_config.margin_m``,
+    as ``map_config.source`` says (truth or orbital)."""
+    map_config.validate()
+    pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    b = heightfield.bounds
+    res = heightfield.resolution_m
+    lo = pts.min(axis=0) - map_config.margin_m
+    hi = pts.max(axis=0) + map_config.margin_m
+    col0 = max(0, math.floor((lo[0] - b.left) / res))
+    col1 = min(heightfield.shape[1], math.ceil((hi[0] - b.left) / res))
+    row0 = max(0, math.floor((b.top - hi[1]) / res))
+    row1 = min(heightfield.shape[0], math.ceil((b.top - lo[1]) / res))
+    z = np.asarray(heightfield.read_window(row0, col0, row1 - row0, col1 - col0), np.float64)
+    x0 = b.left + col0 * res
+    y1 = b.top - row0 * res
+    if map_config.source == "orbital":
+        z, res = orbital_dem(
+            z, resolution_m=res, orbital_resolution_m=map_config.orbital_resolution_m,
+            noise_m=map_config.orbital_noise_m, seed=seed,
+        )  # fmt: skip
+    return build_costmap(z, resolution_m=res, x0_m=x0, y1_m=y1, rover=rover, config=hazards)
+
+
+__all__ = [
+    "MAP_SOURCES",
+    "Costmap",
+    "HazardConfig",
+    "MapConfig",
+    "RoverEnvelope",
+    "build_costmap",
+    "costmap_for_site",
+    "hazard_layers",
+    "orbital_dem",
+]

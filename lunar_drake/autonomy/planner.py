@@ -1,0 +1,133 @@
+"""Least-cost paths on a hazard costmap (scikit-image's minimum-cost-path search,
+``skimage.graph.MCP_Geometric``: Dijkstra on the 8-connected grid with diagonal steps
+weighted by sqrt(2)), simplified to waypoints. Pure; no Drake."""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+from skimage.graph import MCP_Geometric
+
+from lunar_drake.autonomy.costmap import Costmap
+from lunar_drake.errors import LunarDrakeError, OutOfBoundsError
+
+
+class PlanningError(LunarDrakeError, ValueError):
+    """A goal the planner cannot serve: inside a hazard, or unreachable."""
+
+
+@dc.dataclass(frozen=True)
+class Path:
+    """A planned path: ``waypoints_xy`` (k, 2) site coordinates (m) from the start to the
+    goal (the grid path string-pulled: straight legs over free cells), ``cells`` (n, 2)
+    the full grid path (row, col), ``cost`` (the path integral of the cost per metre),
+    ``length_m`` (of the grid path)."""
+
+    waypoints_xy: np.ndarray
+    cells: np.ndarray
+    cost: float
+    length_m: float
+
+
+def _cell(costmap: Costmap, xy, what: str) -> tuple:
+    x, y = (float(v) for v in xy)
+    r, c = costmap.cell_of(x, y)
+    if not costmap.inside(r, c):
+        x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
+        rows, cols = costmap.shape
+        raise OutOfBoundsError(
+            f"{what} ({x:.2f}, {y:.2f}) m is off the map: x in [{x0:g}, {x0 + cols * res:g}], "
+            f"y in [{y1 - rows * res:g}, {y1:g}] m"
+        )
+    return r, c
+
+
+def _segment_free(costmap: Costmap, a, b) -> bool:
+    """True if the straight segment between cells ``a`` and ``b`` crosses no lethal cell."""
+    n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) * 2 + 1
+    rr = np.rint(np.linspace(a[0], b[0], n)).astype(int)
+    cc = np.rint(np.linspace(a[1], b[1], n)).astype(int)
+    return bool(np.isfinite(costmap.cost[rr, cc]).all())
+
+
+def _simplify(costmap: Costmap, cells: np.ndarray) -> np.ndarray:
+    """String pulling: from each kept cell, the farthest later cell of the path reachable
+    by a straight segment over free cells (greedy, forward) becomes the next waypoint."""
+    out = [cells[0]]
+    i, n = 0, len(cells)
+    while i < n - 1:
+        j = i + 1
+        while j + 1 < n and _segment_free(costmap, cells[i], cells[j + 1]):
+            j += 1
+        out.append(cells[j])
+        i = j
+    return np.array(out)
+
+
+def plan_path(*, costmap: Costmap, start_xy, goal_xy) -> Path:
+    """The least-cost path from ``start_xy`` to ``goal_xy`` (site, m).
+
+    Raises:
+        OutOfBoundsError: start or goal off the map.
+        PlanningError: goal (or start) inside a hazard (lethal or within the rover's
+            footprint of one), or no hazard-free path joins them.
+    """
+    s = _cell(costmap, start_xy, "start")
+    g = _cell(costmap, goal_xy, "goal")
+    if not np.isfinite(costmap.cost[g]):
+        raise PlanningError(
+            f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
+            f"(slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
+            "within the rover's footprint of one)"
+        )
+    cost = costmap.cost
+    if not np.isfinite(cost[s]):
+        # The rover may stand next to a hazard: let it leave its own cell.
+        cost = cost.copy()
+        cost[s] = 1.0
+    mcp = MCP_Geometric(cost, fully_connected=True)
+    cum, _ = mcp.find_costs([s], [g])
+    if not np.isfinite(cum[g]):
+        raise PlanningError(
+            f"no hazard-free path from ({float(start_xy[0]):.2f}, {float(start_xy[1]):.2f}) "
+            f"to ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m on this map"
+        )
+    cells = np.array(mcp.traceback(g), dtype=int)
+    res = costmap.resolution_m
+    pts = _simplify(costmap, cells)
+    x, y = costmap.centre_of(pts[:, 0], pts[:, 1])
+    wp = np.column_stack([x, y])
+    wp[0] = [float(start_xy[0]), float(start_xy[1])]
+    wp[-1] = [float(goal_xy[0]), float(goal_xy[1])]
+    steps = np.diff(cells, axis=0)
+    length = float(np.sum(np.hypot(steps[:, 0], steps[:, 1]))) * res
+    return Path(waypoints_xy=wp, cells=cells, cost=float(cum[g]) * res, length_m=length)
+
+
+def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> None:
+    """Draws the costmap (grey: cost, red: lethal) and the path on a matplotlib axis."""
+    rows, cols = costmap.shape
+    res = costmap.resolution_m
+    extent = (costmap.x0_m, costmap.x0_m + cols * res, costmap.y1_m - rows * res, costmap.y1_m)
+    finite = np.where(np.isfinite(costmap.cost), costmap.cost, np.nan)
+    ax.imshow(finite, extent=extent, cmap="Greys", origin="upper")
+    lethal = np.ma.masked_where(np.isfinite(costmap.cost), np.ones(costmap.shape))
+    ax.imshow(lethal, extent=extent, cmap="autumn", origin="upper", alpha=0.6)
+    if path is not None:
+        ax.plot(path.waypoints_xy[:, 0], path.waypoints_xy[:, 1], "c.-", lw=1.5)
+        ax.plot(*path.waypoints_xy[0], "go")
+        ax.plot(*path.waypoints_xy[-1], "b*", ms=10)
+    ax.set_xlabel("x (m, east)")
+    ax.set_ylabel("y (m, north)")
+    if title:
+        ax.set_title(title)
+    ax.set_aspect("equal")
+
+
+def straight_length_m(a, b) -> float:
+    return math.hypot(float(b[0]) - float(a[0]), float(b[1]) - float(a[1]))
+
+
+__all__ = ["Path", "PlanningError", "plan_path", "plot_plan", "straight_length_m"]

@@ -1,0 +1,60 @@
+"""`lunar-drake plan`: the ground's hazard costmap of a scenario's site and the
+least-cost path from the rover's start to a goal (plan.png, path.csv, plan.json)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
+from lunar_drake.autonomy.planner import plan_path, plot_plan
+from lunar_drake.files import atomic_path, atomic_write_text, ensure_output_dir
+
+
+def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
+    """Plans on the scenario's ground map (``ground.map``, ``ground.hazards``) from
+    ``start_xy`` (default: the rover's spawn point) to ``goal_xy`` (site m) and writes
+    ``plan.png`` (costmap, lethal cells, path), ``path.csv`` (``x_m,y_m`` waypoints) and
+    ``plan.json``; returns the plan.json dict. Raises ``OutOfBoundsError`` /
+    ``PlanningError`` (one line) for goals off the map, in a hazard or unreachable."""
+    from matplotlib.figure import Figure
+
+    start = (scenario.rover.spawn_x_m, scenario.rover.spawn_y_m) if start_xy is None else start_xy
+    rover = RoverEnvelope.of(scenario.rover.description)
+    cm = costmap_for_site(
+        heightfield=site.heightfield,
+        points_xy=[start, goal_xy],
+        rover=rover,
+        hazards=scenario.ground.hazards,
+        map_config=scenario.ground.map,
+        seed=scenario.random_seed,
+    )
+    path = plan_path(costmap=cm, start_xy=start, goal_xy=goal_xy)
+    out = ensure_output_dir(out_dir, what="--out directory")
+    lines = ["x_m,y_m"] + [f"{x:.4f},{y:.4f}" for x, y in path.waypoints_xy]
+    atomic_write_text(out / "path.csv", "\n".join(lines) + "\n", what="path table")
+    lethal = ~np.isfinite(cm.cost)
+    doc = {
+        "scenario": scenario.name,
+        "map": scenario.ground.map.source,
+        "start_xy_m": [float(v) for v in start],
+        "goal_xy_m": [float(v) for v in goal_xy],
+        "length_m": round(path.length_m, 3),
+        "straight_line_m": round(float(np.hypot(*(np.subtract(goal_xy, start)))), 3),
+        "cost": round(path.cost, 3),
+        "waypoints": len(path.waypoints_xy),
+        "grid": {"shape": list(cm.shape), "resolution_m": cm.resolution_m},
+        "lethal_fraction": round(float(lethal.mean()), 4),
+        "footprint_radius_m": round(rover.footprint_radius_m, 3),
+    }
+    atomic_write_text(out / "plan.json", json.dumps(doc, indent=2) + "\n", what="plan summary")
+    fig = Figure(figsize=(7, 7))
+    ax = fig.subplots()
+    plot_plan(cm, path, ax=ax, title=f"{scenario.name}: {doc['map']} map, "
+              f"{doc['length_m']:.1f} m path (red: hazards, inflated)")  # fmt: skip
+    fig.tight_layout()
+    with atomic_path(Path(out) / "plan.png", what="plot") as tmp:
+        fig.savefig(tmp, dpi=110)
+    return doc
