@@ -157,6 +157,10 @@ def _cmd_run(args) -> int:
             f"heading {loc['final_heading_error_deg']:.2f} deg off; ground received "
             f"{_plural(summary['telemetry_received'], 'telemetry packet')}"
         )
+    if summary.get("goals"):
+        got = sum(g["reached"] for g in summary["goals"])
+        closest = ", ".join(f"{g['closest_m']:.2f}" for g in summary["goals"])
+        print(f"Goals: {got} of {len(summary['goals'])} reached (closest approach {closest} m)")
     files = outputs.run_files()
     if summary["camera_frames"]:
         files.append(f"frames/ ({_plural(summary['camera_frames'], 'stereo frame')})")

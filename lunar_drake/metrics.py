@@ -118,6 +118,30 @@ def localization(logs: SimulationLogs) -> dict:
     return out
 
 
+def goals(*, scenario: Scenario, logs: SimulationLogs) -> list:
+    """Per operator goal (``ground.goals``), scored on truth: the closest the chassis came
+    (m, horizontal), when (s), and ``reached`` (within ``ground.goal_tolerance_m``); the
+    last goal also gets the final distance."""
+    pose = logs.vectors["truth.pose"]
+    if not scenario.ground.goals or not len(pose.times):
+        return []
+    tol = scenario.ground.goal_tolerance_m
+    out = []
+    for k, g in enumerate(scenario.ground.goals):
+        d = np.hypot(pose.data[:, 0] - g.x_m, pose.data[:, 1] - g.y_m)
+        i = int(np.argmin(d))
+        row = {
+            "goal_xy_m": [g.x_m, g.y_m],
+            "closest_m": _r(float(d[i])),
+            "closest_at_s": _r(float(pose.times[i]), 3),
+            "reached": bool(d[i] <= tol),
+        }
+        if k == len(scenario.ground.goals) - 1:
+            row["final_distance_m"] = _r(float(d[-1]))
+        out.append(row)
+    return out
+
+
 def link_stats(logs: SimulationLogs) -> dict:
     """Per direction: messages and bytes offered, delivered, still in flight, dropped
     (and why), and the delivery latency (s; min and max)."""
@@ -154,6 +178,7 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "rover": traverse(logs),
         "parked": parked_drift(logs),
         "localization": localization(logs),
+        "goals": goals(scenario=scenario, logs=logs),
         "link": link_stats(logs),
         "telemetry_received": len(tel.seq),
         "camera_frames": int(logs.frames_written),

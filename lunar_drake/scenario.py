@@ -232,6 +232,14 @@ def _default_route() -> list:
 
 
 @dc.dataclass
+class Goal:
+    """An operator goal: a point in the site frame (m)."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+
+
+@dc.dataclass
 class GroundConfig:
     """Operations software on Earth (reads only what the downlink delivers).
 
@@ -239,6 +247,12 @@ class GroundConfig:
         rate_hz: tick of the ground software (Hz); one command is sent per tick.
         route: the operator's drive commands, sent in order from t = 0 and run one
             after the other on board.
+        goals: operator goals; when given, the ground plans a hazard-free path through
+            them in order on its map (from the spawn point) before the drive and sends
+            one goto command per goal instead of the route.
+        goal_tolerance_m: a goal is reached within this distance (m; on board: by the
+            estimate; scored: by truth).
+        drive_speed_mps: goto driving speed (m/s).
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
             (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
@@ -246,6 +260,9 @@ class GroundConfig:
 
     rate_hz: float = 10.0
     route: list[RouteSegment] = dc.field(default_factory=_default_route)
+    goals: list[Goal] = dc.field(default_factory=list)
+    goal_tolerance_m: float = 1.0
+    drive_speed_mps: float = 0.2
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
 
@@ -395,6 +412,11 @@ def validate_scenario(s: Scenario) -> None:
     _section("flight.estimator", f.estimator.validate)
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
+    check_range("ground.goal_tolerance_m", s.ground.goal_tolerance_m, 0.05, 100.0, unit=" m")
+    check_range("ground.drive_speed_mps", s.ground.drive_speed_mps, 0.01, 2.0, unit=" m/s")
+    for k, g in enumerate(s.ground.goals):
+        check_range(f"ground.goals[{k}].x_m", g.x_m, -1e6, 1e6, unit=" m")
+        check_range(f"ground.goals[{k}].y_m", g.y_m, -1e6, 1e6, unit=" m")
     _section("ground.map", s.ground.map.validate)
     _section("ground.hazards", s.ground.hazards.validate)
     _section("comms.uplink", s.comms.uplink.validate)

@@ -72,6 +72,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
     builder.Connect(odometry.p_WB_output, gimbal.p_WB_input)
     builder.Connect(odometry.q_WB_output, gimbal.q_WB_input)
     builder.Connect(odometry.pose_estimate_output, telemetry.pose_estimate_input)
+    builder.Connect(odometry.pose_estimate_output, executor.pose_input)
     builder.Connect(executor.twist_output, telemetry.twist_input)
     builder.Connect(executor.brake_output, telemetry.brake_input)
     builder.Connect(executor.status_output, telemetry.status_input)

@@ -36,7 +36,7 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
         "plant", MakePlantDiagram(scenario=scenario, site=site, meshcat=meshcat)
     )
     flight = builder.AddNamedSystem("flight", MakeFlightDiagram(scenario=scenario))
-    ground = builder.AddNamedSystem("ground", MakeGroundDiagram(scenario=scenario))
+    ground = builder.AddNamedSystem("ground", MakeGroundDiagram(scenario=scenario, site=site))
     light = None
     if scenario.comms.uplink.delay_s is None or scenario.comms.downlink.delay_s is None:
         light = light_time_s(
