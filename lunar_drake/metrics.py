@@ -142,6 +142,59 @@ def goals(*, scenario: Scenario, logs: SimulationLogs) -> list:
     return out
 
 
+#: Penetration (m) of the terrain into the chassis underside that counts as a strike
+#: (the belly contact is a stiff penalty: a resting belly sinks a few millimetres).
+BELLY_STRIKE_M = 0.01
+#: Commanded but not moving (truth speed below 1 cm/s) for this long (s): immobilized.
+IMMOBILIZED_S = 10.0
+
+
+def hazards(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """Hazard strikes on truth: ``belly`` (the true terrain, rocks included, more than
+    :data:`BELLY_STRIKE_M` above the chassis underside anywhere on a 7 x 5 grid over the
+    chassis footprint), ``tilt`` (roll or pitch beyond the rover's
+    ``max_rated_slope_deg``), ``immobilized`` (commanded to move but slower than 1 cm/s
+    for :data:`IMMOBILIZED_S`); each counted as events (entries into the state), at the
+    log period; ``strikes`` is their sum."""
+    from lunar_drake.rotations import rotation_matrix_from_rpy
+
+    pose = logs.vectors["truth.pose"]
+    d = scenario.rover.description
+    if not len(pose.times):
+        return {"strikes": 0, "belly": 0, "tilt": 0, "immobilized": 0}
+    gx, gy = np.meshgrid(
+        np.linspace(-0.5, 0.5, 7) * d.chassis_length_m,
+        np.linspace(-0.5, 0.5, 5) * d.chassis_width_m,
+    )
+    under_C = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, -0.5 * d.chassis_height_m)])
+    hf = site.heightfield
+    belly = np.zeros(len(pose.times), bool)
+    for k, row in enumerate(pose.data):
+        p_W = row[:3] + under_C @ rotation_matrix_from_rpy(row[3:6]).T
+        z, ok = hf.heights_within(p_W[:, 0], p_W[:, 1])
+        belly[k] = bool(np.any(ok & (z - p_W[:, 2] > BELLY_STRIKE_M)))
+    limit = math.radians(d.max_rated_slope_deg)
+    tilt = (np.abs(pose.data[:, 3]) > limit) | (np.abs(pose.data[:, 4]) > limit)
+    twist = logs.vectors["flight.twist_command"]
+    cmd = np.interp(pose.times, twist.times, np.abs(twist.data).max(axis=1)) > 0.0
+    slow = np.hypot(pose.data[:, 6], pose.data[:, 7]) < 0.01
+    stuck = np.zeros(len(pose.times), bool)
+    since = None
+    for k, t in enumerate(pose.times):
+        if cmd[k] and slow[k]:
+            since = t if since is None else since
+            stuck[k] = t - since >= IMMOBILIZED_S
+        else:
+            since = None
+
+    def events(a):
+        return int(np.sum(a[1:] & ~a[:-1]) + (1 if a[0] else 0))
+
+    out = {"belly": events(belly), "tilt": events(tilt), "immobilized": events(stuck)}
+    out["strikes"] = sum(out.values())
+    return out
+
+
 def link_stats(logs: SimulationLogs) -> dict:
     """Per direction: messages and bytes offered, delivered, still in flight, dropped
     (and why), and the delivery latency (s; min and max)."""
@@ -179,6 +232,7 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "parked": parked_drift(logs),
         "localization": localization(logs),
         "goals": goals(scenario=scenario, logs=logs),
+        "hazards": hazards(scenario=scenario, site=site, logs=logs),
         "link": link_stats(logs),
         "telemetry_received": len(tel.seq),
         "camera_frames": int(logs.frames_written),

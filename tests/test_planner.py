@@ -51,10 +51,12 @@ def test_a_boulder_is_lethal_inflated_by_the_footprint_and_the_path_goes_round()
     assert cm.lethal_raw.sum() > 0
     r, c = cm.cell_of(0.0, 0.0)
     assert not np.isfinite(cm.cost[r, c])
-    # Inflation: cells within footprint radius + margin (1.3 m) of the rock are lethal.
-    r2, c2 = cm.cell_of(1.6, 0.0)
+    # Inflation: cells within the footprint radius + margin (0.7 + 0.2 m) of the rock
+    # are lethal (0.5 m planning cells: to about 1.4 m from its centre).
+    assert ROVER.footprint_radius_m == pytest.approx(0.7)
+    r2, c2 = cm.cell_of(1.2, 0.0)
     assert not np.isfinite(cm.cost[r2, c2])
-    r3, c3 = cm.cell_of(3.5, 0.0)
+    r3, c3 = cm.cell_of(2.5, 0.0)
     assert np.isfinite(cm.cost[r3, c3])
     path = plan_path(costmap=cm, start_xy=(-15.0, 0.0), goal_xy=(15.0, 0.0))
     assert np.allclose(path.waypoints_xy[0], (-15.0, 0.0))

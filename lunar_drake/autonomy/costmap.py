@@ -12,10 +12,11 @@ From a DEM ``z`` (m, row 0 north, pixel ``res`` m):
 
 Each layer is reduced to the planning grid (``resolution_m``) by its maximum over the
 block (conservative). A cell is *lethal* when slope > ``max_slope_deg`` or step >
-``max_step_m``; lethal cells are inflated by the rover's footprint radius (a cell within
-that distance of a lethal one is lethal: the rover's centre must stay that far from
-hazards). Free cells cost ``1 + slope_weight (slope / max_slope)^2 + roughness_weight
-(roughness / max_roughness)^2`` per metre; lethal ones ``inf``.
+``max_step_m``; lethal cells are inflated by the rover's footprint radius plus
+``inflation_m`` (a cell within that distance of a lethal one is lethal: the rover's
+centre must stay that far from hazards). Free cells cost ``1 + slope_weight (slope /
+max_slope)^2 + roughness_weight (roughness / max_roughness)^2`` per metre; lethal ones
+``inf``.
 
 :func:`orbital_dem` gives the map a mission would have from orbit: the DEM averaged over
 blocks of ``orbital_resolution_m`` (rocks vanish, craters stay) plus seeded noise.
@@ -41,8 +42,8 @@ class HazardConfig:
         resolution_m: planning grid (m), (0, 50].
         max_slope_deg: steepest traversable slope (deg); default 14, what both rovers
             climb on lunar regolith in the slip study (the skid rover spins out at 16).
-        max_step_m: tallest step the wheels may meet (m); 0 = half the smaller of the
-            wheel radius and the belly clearance.
+        max_step_m: tallest step the wheels may meet (m); 0 = 0.8 times the smaller of
+            the wheel radius and the belly clearance.
         max_roughness_m: roughness that doubles a cell's cost (m), > 0.
         baseline_m: smoothing baseline of slope and roughness (m); 0 = the wheelbase.
         step_window_m: window of the step height (m); 0 = the wheel diameter.
@@ -103,8 +104,11 @@ class MapConfig:
 
 @dc.dataclass(frozen=True)
 class RoverEnvelope:
-    """What the costmap needs of a rover (m): footprint radius (centre to the farthest
-    wheel edge), wheelbase, wheel radius and belly clearance."""
+    """What the costmap needs of a rover (m): footprint radius (the inscribed radius of
+    the wheel footprint: half the track plus half a wheel width, or half the chassis
+    width if wider; hazards are kept that far from the rover's centre line, so a rock
+    may pass under the belly only if it is below the step limit), wheelbase, wheel
+    radius and belly clearance."""
 
     footprint_radius_m: float
     wheelbase_m: float
@@ -114,12 +118,10 @@ class RoverEnvelope:
     @classmethod
     def of(cls, description) -> "RoverEnvelope":
         """From a :class:`~lunar_drake.models.rover_description.RoverDescription`."""
-        half_l = 0.5 * description.wheelbase_m + description.wheel_radius_m
         half_w = 0.5 * description.track_m + 0.5 * description.wheel_width_m
-        half_l = max(half_l, 0.5 * description.chassis_length_m)
         half_w = max(half_w, 0.5 * description.chassis_width_m)
         return cls(
-            footprint_radius_m=math.hypot(half_l, half_w),
+            footprint_radius_m=half_w,
             wheelbase_m=description.wheelbase_m,
             wheel_radius_m=description.wheel_radius_m,
             ground_clearance_m=description.ground_clearance_m,
@@ -199,7 +201,7 @@ def build_costmap(
     config.validate()
     baseline = config.baseline_m or rover.wheelbase_m
     window = config.step_window_m or 2.0 * rover.wheel_radius_m
-    max_step = config.max_step_m or 0.5 * min(rover.wheel_radius_m, rover.ground_clearance_m)
+    max_step = config.max_step_m or 0.8 * min(rover.wheel_radius_m, rover.ground_clearance_m)
     slope, step, rough = hazard_layers(
         z, resolution_m=resolution_m, baseline_m=baseline, step_window_m=window
     )

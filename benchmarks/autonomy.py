@@ -1,0 +1,181 @@
+"""Study: driving to seeded goals through the link, scored on truth.
+
+    .venv/bin/python benchmarks/autonomy.py --map truth --goals 10 --workers 2 \\
+        --runs runs/autonomy_truth --out bench_autonomy_truth.json
+    .venv/bin/python benchmarks/autonomy.py --map orbital --goals 10 --runs runs/autonomy_orbital \\
+        --out bench_autonomy_orbital.json
+
+N goals are drawn (seeded) 30-60 m from the scenario's spawn point, each free and
+reachable on the *true* costmap (the site DEM with rocks). Each goal is its own mission
+(the scenario with ``ground.goals: [goal]``, the ground's map ``--map``, cameras off,
+time for three times the straight-line distance at the drive speed plus two minutes),
+written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
+mean_drift_pct, rtt_s, map`` and ``runs`` (``goal_xy, reached, strikes, final_error_m,
+distance_m, drift_pct, run_dir``; a goal the ground could not plan to on its map is
+``reached: false`` with ``error``). Prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from lunar_drake import rng
+from lunar_drake.files import atomic_write_text, check_output_file
+
+
+def sample_goals(*, scenario, site, n: int, seed: int, r_min=30.0, r_max=60.0) -> list:
+    """``n`` goals (x, y) r_min..r_max m from the spawn, free and reachable on the true
+    costmap."""
+    from lunar_drake.autonomy.costmap import MapConfig, RoverEnvelope, costmap_for_site
+    from lunar_drake.autonomy.planner import PlanningError, plan_path
+
+    start = np.array([scenario.rover.spawn_x_m, scenario.rover.spawn_y_m])
+    cm = costmap_for_site(
+        heightfield=site.heightfield,
+        points_xy=[start - r_max, start + r_max],
+        rover=RoverEnvelope.of(scenario.rover.description),
+        hazards=scenario.ground.hazards,
+        map_config=MapConfig(source="truth", margin_m=5.0),
+        seed=scenario.random_seed,
+    )
+    g = rng.generator(seed, "benchmarks/autonomy/goals")
+    goals = []
+    for _ in range(200 * n):
+        if len(goals) == n:
+            break
+        r = g.uniform(r_min, r_max)
+        a = g.uniform(-math.pi, math.pi)
+        goal = start + r * np.array([math.cos(a), math.sin(a)])
+        try:
+            plan_path(costmap=cm, start_xy=start, goal_xy=goal)
+        except (PlanningError, LookupError, ValueError):
+            continue
+        goals.append((round(float(goal[0]), 2), round(float(goal[1]), 2)))
+    if len(goals) < n:
+        raise SystemExit(f"only {len(goals)} reachable goals found on this site")
+    return goals
+
+
+def run_goal(scenario_name: str, goal, map_source: str, run_dir: str) -> dict:
+    """One mission to ``goal``; its run directory and scored row."""
+    from lunar_drake import metrics, outputs
+    from lunar_drake.errors import LunarDrakeError
+    from lunar_drake.scenario import Goal
+    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
+    s = load_scenario(scenario_name=scenario_name)
+    s = copy.deepcopy(s)
+    s.sensors.camera.enabled = False
+    s.ground.goals = [Goal(x_m=goal[0], y_m=goal[1])]
+    s.ground.map.source = map_source
+    dist = math.hypot(goal[0] - s.rover.spawn_x_m, goal[1] - s.rover.spawn_y_m)
+    s.simulation_duration = round(3.0 * dist / s.ground.drive_speed_mps + 120.0, 1)
+    s.name = f"{scenario_name} goal ({goal[0]:.1f}, {goal[1]:.1f}) on the {map_source} map"
+    site = load_site(s, progress=False)
+    row = {"goal_xy": list(goal), "run_dir": run_dir}
+    try:
+        logs = simulate(scenario=s, site=site, progress=False)
+    except LunarDrakeError as exc:  # the ground could not plan to it on its map
+        return {**row, "reached": False, "strikes": 0, "error": f"{type(exc).__name__}: {exc}"}
+    summary = metrics.summarize(scenario=s, site=site, logs=logs)
+    Path(run_dir).mkdir(parents=True, exist_ok=True)
+    outputs.write_run(Path(run_dir), scenario=s, logs=logs, summary=summary, timing=logs.wall)
+    (g,) = summary["goals"]
+    loc = summary["localization"]
+    moved = summary["rover"]["distance_m"]
+    up = [r for r in logs.link if r.direction == "uplink" and math.isfinite(r.t_received)]
+    down = [r for r in logs.link if r.direction == "downlink" and math.isfinite(r.t_received)]
+    rtt = (np.mean([r.t_received - r.t_sent for r in up]) if up else math.nan) + (
+        np.mean([r.t_received - r.t_sent for r in down]) if down else math.nan
+    )
+    return {
+        **row,
+        "reached": g["reached"],
+        "strikes": summary["hazards"]["strikes"],
+        "final_error_m": g["final_distance_m"],
+        "distance_m": moved,
+        "drift_pct": 100.0 * loc["final_position_error_m"] / moved if moved > 0 else None,
+        "rtt_s": float(rtt),
+    }
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scenario", default="default")
+    p.add_argument("--map", choices=["truth", "orbital"], default="truth")
+    p.add_argument("--goals", type=int, default=10)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--runs", required=True, help="directory for the run directories")
+    p.add_argument("--out", default=None, help="write results as JSON here")
+    a = p.parse_args(argv)
+    if a.out:
+        check_output_file(a.out, what="results JSON")
+
+    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.site import load_site
+
+    scenario = load_scenario(scenario_name=a.scenario)
+    site = load_site(scenario, progress=True)
+    goals = sample_goals(scenario=scenario, site=site, n=a.goals, seed=a.seed)
+    runs = Path(a.runs)
+    runs.mkdir(parents=True, exist_ok=True)
+    jobs = [(a.scenario, gl, a.map, str(runs / f"goal_{k:02d}")) for k, gl in enumerate(goals)]
+    if a.workers > 1:
+        import dask
+
+        rows = list(
+            dask.compute(
+                *[dask.delayed(run_goal)(*j) for j in jobs],
+                scheduler="processes",
+                num_workers=a.workers,
+            )
+        )
+    else:
+        from tqdm.auto import tqdm
+
+        rows = [run_goal(*j) for j in tqdm(jobs, desc="goals", unit="run")]
+    drifts = [r["drift_pct"] for r in rows if r.get("drift_pct") is not None]
+    rtts = [r["rtt_s"] for r in rows if "rtt_s" in r and math.isfinite(r["rtt_s"])]
+    result = {
+        "goals": len(rows),
+        "reached": sum(bool(r["reached"]) for r in rows),
+        "hazard_strikes": sum(r["strikes"] for r in rows),
+        "mean_drift_pct": float(np.mean(drifts)) if drifts else None,
+        "rtt_s": float(np.mean(rtts)) if rtts else None,
+        "map": a.map,
+        "scenario": a.scenario,
+        "runs": rows,
+    }
+    print(
+        f"{'goal':>16} {'reached':>8} {'strikes':>8} {'final m':>8} {'driven m':>9} {'drift %':>8}"
+    )
+    for r in rows:
+        fe = r.get("final_error_m")
+        print(
+            f"({r['goal_xy'][0]:6.1f},{r['goal_xy'][1]:6.1f}) {r['reached']!s:>8} "
+            f"{r['strikes']:>8} {'-' if fe is None else f'{fe:.2f}':>8} "
+            f"{r.get('distance_m', float('nan')):>9.1f} "
+            f"{r.get('drift_pct') or float('nan'):>8.2f}"
+            + (f"  {r['error']}" if "error" in r else "")
+        )
+    print(
+        f"{result['reached']}/{result['goals']} goals reached, {result['hazard_strikes']} hazard "
+        f"strikes, mean drift {result['mean_drift_pct']}, rtt {result['rtt_s']} s ({a.map} map)"
+    )
+    if a.out:
+        atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
