@@ -159,8 +159,11 @@ def _cmd_run(args) -> int:
         )
     if summary.get("goals"):
         got = sum(g["reached"] for g in summary["goals"])
-        closest = ", ".join(f"{g['closest_m']:.2f}" for g in summary["goals"])
-        print(f"Goals: {got} of {len(summary['goals'])} reached (closest approach {closest} m)")
+        final = summary["goals"][-1]["final_distance_m"]
+        print(
+            f"Goals: {got} of {len(summary['goals'])} reached (truth; the last one "
+            f"{final:.2f} m away at the end)"
+        )
     files = outputs.run_files()
     if summary["camera_frames"]:
         files.append(f"frames/ ({_plural(summary['camera_frames'], 'stereo frame')})")

@@ -120,13 +120,15 @@ def localization(logs: SimulationLogs) -> dict:
 
 def goals(*, scenario: Scenario, logs: SimulationLogs) -> list:
     """Per operator goal (``ground.goals``), scored on truth: the closest the chassis came
-    (m, horizontal), when (s), and ``reached`` (within ``ground.goal_tolerance_m``); the
-    last goal also gets the final distance."""
+    (m, horizontal) and when (s); ``reached``: the last goal when the *final* true
+    position is within ``ground.goal_tolerance_m`` (``final_distance_m``), an earlier
+    goal when the closest approach is."""
     pose = logs.vectors["truth.pose"]
     if not scenario.ground.goals or not len(pose.times):
         return []
     tol = scenario.ground.goal_tolerance_m
     out = []
+    last = len(scenario.ground.goals) - 1
     for k, g in enumerate(scenario.ground.goals):
         d = np.hypot(pose.data[:, 0] - g.x_m, pose.data[:, 1] - g.y_m)
         i = int(np.argmin(d))
@@ -134,10 +136,12 @@ def goals(*, scenario: Scenario, logs: SimulationLogs) -> list:
             "goal_xy_m": [g.x_m, g.y_m],
             "closest_m": _r(float(d[i])),
             "closest_at_s": _r(float(pose.times[i]), 3),
-            "reached": bool(d[i] <= tol),
         }
-        if k == len(scenario.ground.goals) - 1:
+        if k == last:
             row["final_distance_m"] = _r(float(d[-1]))
+            row["reached"] = bool(d[-1] <= tol)
+        else:
+            row["reached"] = bool(d[i] <= tol)
         out.append(row)
     return out
 

@@ -250,8 +250,11 @@ class GroundConfig:
         goals: operator goals; when given, the ground plans a hazard-free path through
             them in order on its map (from the spawn point) before the drive and sends
             one goto command per goal instead of the route.
-        goal_tolerance_m: a goal is reached within this distance (m; on board: by the
-            estimate; scored: by truth).
+        goal_tolerance_m: a goal is reached when the true position comes within this
+            distance (m; scoring).
+        goto_tolerance_m: on board, a goto ends when the *estimate* is this close to
+            its goal (m); smaller than ``goal_tolerance_m`` so that the estimate's drift
+            has room.
         drive_speed_mps: goto driving speed (m/s).
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
@@ -262,6 +265,7 @@ class GroundConfig:
     route: list[RouteSegment] = dc.field(default_factory=_default_route)
     goals: list[Goal] = dc.field(default_factory=list)
     goal_tolerance_m: float = 1.0
+    goto_tolerance_m: float = 0.2
     drive_speed_mps: float = 0.2
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
@@ -413,6 +417,7 @@ def validate_scenario(s: Scenario) -> None:
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
     check_range("ground.goal_tolerance_m", s.ground.goal_tolerance_m, 0.05, 100.0, unit=" m")
+    check_range("ground.goto_tolerance_m", s.ground.goto_tolerance_m, 0.05, 100.0, unit=" m")
     check_range("ground.drive_speed_mps", s.ground.drive_speed_mps, 0.01, 2.0, unit=" m/s")
     for k, g in enumerate(s.ground.goals):
         check_range(f"ground.goals[{k}].x_m", g.x_m, -1e6, 1e6, unit=" m")

@@ -60,7 +60,7 @@ def goal_commands(scenario: Scenario, site) -> list[GotoCommand]:
             GotoCommand(
                 waypoints=tuple((float(x), float(y)) for x, y in path.waypoints_xy),
                 speed_mps=g.drive_speed_mps,
-                tolerance_m=0.5 * g.goal_tolerance_m,
+                tolerance_m=g.goto_tolerance_m,
                 timeout_s=timeout,
             )
         )
