@@ -129,7 +129,8 @@ class StateEstimator(LeafSystem):
         new_fix = started and np.linalg.norm(fix) > 0.5 and not np.array_equal(fix, s[_FIX])
         if cfg.use_star_tracker and new_fix:
             x, P, _ = ekf.update_attitude(x, P, q_measured=fix, config=cfg)
-        if cfg.use_tilt and started:
+        tick = round(context.get_time() / self._dt)
+        if cfg.use_tilt and started and tick % cfg.tilt_every == 0:
             x, P, _ = ekf.update_tilt(
                 x, P, accel_mps2=imu[3:6], gyro_radps=imu[:3], gravity_mps2=GRAVITY_MPS2,
                 config=cfg,
