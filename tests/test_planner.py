@@ -145,3 +145,20 @@ def test_plan_command_writes_the_plot_path_and_summary(small_site, tmp_path, cap
     assert not (tmp_path / "q").exists()
     assert main([*args, "--map", "orbital", "--out", str(tmp_path / "o")]) == 0
     assert json.loads((tmp_path / "o" / "plan.json").read_text())["map"] == "orbital"
+
+
+def test_nan_and_off_site_points_are_clear_errors(small_site):
+    from lunar_drake.autonomy.costmap import MapConfig, costmap_for_site
+    from lunar_drake.errors import OutOfRangeError
+
+    X, _ = _grid()
+    cm = _costmap(np.zeros_like(X))
+    with pytest.raises(OutOfRangeError, match="goal = \\(nan"):
+        plan_path(costmap=cm, start_xy=(0.0, 0.0), goal_xy=(math.nan, 0.0))
+    _, site = small_site
+    kw = {"heightfield": site.heightfield, "rover": ROVER, "hazards": HazardConfig(),
+          "map_config": MapConfig(), "seed": 0}  # fmt: skip
+    with pytest.raises(OutOfBoundsError, match="lie off the site"):
+        costmap_for_site(points_xy=[(400.0, 400.0), (500.0, 500.0)], **kw)
+    with pytest.raises(OutOfRangeError, match="must be finite"):
+        costmap_for_site(points_xy=[(0.0, math.inf)], **kw)

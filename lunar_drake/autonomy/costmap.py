@@ -31,7 +31,7 @@ import numpy as np
 from scipy import ndimage
 
 from lunar_drake import rng
-from lunar_drake.errors import ConfigError, check_range
+from lunar_drake.errors import ConfigError, OutOfBoundsError, OutOfRangeError, check_range
 
 
 @dc.dataclass
@@ -253,6 +253,8 @@ def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards:
     as ``map_config.source`` says (truth or orbital)."""
     map_config.validate()
     pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+    if not np.isfinite(pts).all():
+        raise OutOfRangeError(f"points_xy = {pts.tolist()!r} m must be finite site coordinates")
     b = heightfield.bounds
     res = heightfield.resolution_m
     lo = pts.min(axis=0) - map_config.margin_m
@@ -261,6 +263,11 @@ def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards:
     col1 = min(heightfield.shape[1], math.ceil((hi[0] - b.left) / res))
     row0 = max(0, math.floor((b.top - hi[1]) / res))
     row1 = min(heightfield.shape[0], math.ceil((b.top - lo[1]) / res))
+    if row1 - row0 < 2 or col1 - col0 < 2:
+        raise OutOfBoundsError(
+            f"points {pts.tolist()!r} m (margin {map_config.margin_m:g} m) lie off the site: "
+            f"x in [{b.left:g}, {b.right:g}], y in [{b.bottom:g}, {b.top:g}] m"
+        )
     z = np.asarray(heightfield.read_window(row0, col0, row1 - row0, col1 - col0), np.float64)
     x0 = b.left + col0 * res
     y1 = b.top - row0 * res

@@ -11,7 +11,7 @@ import numpy as np
 from skimage.graph import MCP_Geometric
 
 from lunar_drake.autonomy.costmap import Costmap
-from lunar_drake.errors import LunarDrakeError, OutOfBoundsError
+from lunar_drake.errors import LunarDrakeError, OutOfBoundsError, OutOfRangeError
 
 
 class PlanningError(LunarDrakeError, ValueError):
@@ -33,6 +33,8 @@ class Path:
 
 def _cell(costmap: Costmap, xy, what: str) -> tuple:
     x, y = (float(v) for v in xy)
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise OutOfRangeError(f"{what} = ({x!r}, {y!r}) m must be finite site coordinates")
     r, c = costmap.cell_of(x, y)
     if not costmap.inside(r, c):
         x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
@@ -126,8 +128,4 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     ax.set_aspect("equal")
 
 
-def straight_length_m(a, b) -> float:
-    return math.hypot(float(b[0]) - float(a[0]), float(b[1]) - float(a[1]))
-
-
-__all__ = ["Path", "PlanningError", "plan_path", "plot_plan", "straight_length_m"]
+__all__ = ["Path", "PlanningError", "plan_path", "plot_plan"]
