@@ -63,7 +63,7 @@ def sample_goals(*, scenario, site, n: int, seed: int, r_min=30.0, r_max=60.0) -
     return goals
 
 
-def run_goal(scenario_name: str, goal, map_source: str, run_dir: str) -> dict:
+def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str = "{}") -> dict:
     """One mission to ``goal``; its run directory and scored row."""
     from lunar_drake import metrics, outputs
     from lunar_drake.errors import LunarDrakeError
@@ -72,7 +72,7 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str) -> dict:
     from lunar_drake.simulation import simulate
     from lunar_drake.site import load_site
 
-    s = load_scenario(scenario_name=scenario_name)
+    s = load_scenario(scenario_name=scenario_name, scenario_text=text)
     s = copy.deepcopy(s)
     s.sensors.camera.enabled = False
     s.ground.goals = [Goal(x_m=goal[0], y_m=goal[1])]
@@ -104,6 +104,8 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str) -> dict:
         "final_error_m": g["final_distance_m"],
         "distance_m": moved,
         "drift_pct": 100.0 * loc["final_position_error_m"] / moved if moved > 0 else None,
+        "safings": sum(summary["modes"]["safings"].values()),
+        "replans": summary["ground"]["replans"],
         "rtt_s": float(rtt),
     }
 
@@ -111,6 +113,7 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="default")
+    p.add_argument("--scenario-text", default="{}", help="YAML overrides of the scenario")
     p.add_argument("--map", choices=["truth", "orbital"], default="truth")
     p.add_argument("--goals", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
@@ -129,7 +132,10 @@ def main(argv=None) -> int:
     goals = sample_goals(scenario=scenario, site=site, n=a.goals, seed=a.seed)
     runs = Path(a.runs)
     runs.mkdir(parents=True, exist_ok=True)
-    jobs = [(a.scenario, gl, a.map, str(runs / f"goal_{k:02d}")) for k, gl in enumerate(goals)]
+    jobs = [
+        (a.scenario, gl, a.map, str(runs / f"goal_{k:02d}"), a.scenario_text)
+        for k, gl in enumerate(goals)
+    ]
     if a.workers > 1:
         import dask
 
@@ -152,12 +158,15 @@ def main(argv=None) -> int:
         "hazard_strikes": sum(r["strikes"] for r in rows),
         "mean_drift_pct": float(np.mean(drifts)) if drifts else None,
         "rtt_s": float(np.mean(rtts)) if rtts else None,
+        "safings": sum(r.get("safings", 0) for r in rows),
         "map": a.map,
         "scenario": a.scenario,
+        "scenario_text": a.scenario_text,
         "runs": rows,
     }
     print(
         f"{'goal':>16} {'reached':>8} {'strikes':>8} {'final m':>8} {'driven m':>9} {'drift %':>8}"
+        f" {'safed':>6} {'replans':>8}"
     )
     for r in rows:
         fe = r.get("final_error_m")
@@ -165,12 +174,14 @@ def main(argv=None) -> int:
             f"({r['goal_xy'][0]:6.1f},{r['goal_xy'][1]:6.1f}) {r['reached']!s:>8} "
             f"{r['strikes']:>8} {'-' if fe is None else f'{fe:.2f}':>8} "
             f"{r.get('distance_m', float('nan')):>9.1f} "
-            f"{r.get('drift_pct') or float('nan'):>8.2f}"
+            f"{r.get('drift_pct') or float('nan'):>8.2f} "
+            f"{r.get('safings', 0):>6} {r.get('replans', 0):>8}"
             + (f"  {r['error']}" if "error" in r else "")
         )
     print(
         f"{result['reached']}/{result['goals']} goals reached, {result['hazard_strikes']} hazard "
-        f"strikes, mean drift {result['mean_drift_pct']}, rtt {result['rtt_s']} s ({a.map} map)"
+        f"strikes, {result['safings']} safings, mean drift {result['mean_drift_pct']}, "
+        f"rtt {result['rtt_s']} s ({a.map} map)"
     )
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")

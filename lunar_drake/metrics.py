@@ -221,6 +221,40 @@ def link_stats(logs: SimulationLogs) -> dict:
     return out
 
 
+def modes(logs: SimulationLogs) -> dict:
+    """On-board mode changes: ``count``, ``safings`` by reason and every ``transitions``
+    entry (t_s, before, after, reason); ``seen_by_ground``: the mode changes the newest
+    received telemetry packet counted."""
+    safings = {}
+    for m in logs.transitions:
+        if m.after == "safed":
+            safings[m.reason] = safings.get(m.reason, 0) + 1
+    tel = logs.telemetry
+    seen = int(tel.packets[-1, tel.columns.index("mode_changes")]) if len(tel.seq) else 0
+    return {
+        "count": len(logs.transitions),
+        "safings": safings,
+        "seen_by_ground": seen,
+        "transitions": [
+            {"t_s": _r(m.t_s, 3), "before": m.before, "after": m.after, "reason": m.reason}
+            for m in logs.transitions
+        ],
+    }
+
+
+def ground(logs: SimulationLogs) -> dict:
+    """The ground's own account: each goal it was given and its status as the ground
+    judged it from telemetry; counts of plans, replans and resumes."""
+    kinds = [e.kind for e in logs.ground_events]
+    return {
+        "goals": [{"goal_xy_m": [_r(g[0]), _r(g[1])], "status": st} for g, st in logs.ground_goals],
+        "plans": kinds.count("plan"),
+        "replans": sum(1 for e in logs.ground_events if e.kind == "plan" and "replan" in e.detail),
+        "safings_seen": kinds.count("safed"),
+        "resumes": kinds.count("resume"),
+    }
+
+
 def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
     """The deterministic summary of a run (``summary.json``)."""
     tel = logs.telemetry
@@ -232,13 +266,18 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "diagram": "mission",
         "systems": logs.systems,
         "site": site.info,
+        "site_dir": str(site.site.directory or site.site.dem) if site.site else "",
         "rover": traverse(logs),
         "parked": parked_drift(logs),
         "localization": localization(logs),
         "goals": goals(scenario=scenario, logs=logs),
         "hazards": hazards(scenario=scenario, site=site, logs=logs),
         "link": link_stats(logs),
+        "modes": modes(logs),
+        "ground": ground(logs),
         "telemetry_received": len(tel.seq),
+        "images_received": len(logs.images_received),
+        "images_bytes_received": int(sum(r[4] for r in logs.images_received)),
         "camera_frames": int(logs.frames_written),
     }
     return summary

@@ -4,7 +4,10 @@ A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake ru
 --scenario RUN/scenario.yaml`` reproduces the run), ``summary.json`` (deterministic),
 ``timing.json`` (wall-clock figures), the CSV logs in :data:`LOG_FILES`,
 ``telemetry.csv`` (what the ground received), ``link.csv`` (every message over the
-link), ``frames/`` (written during the simulation) and ``meshcat.html`` (with Meshcat).
+link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
+ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
+the ground received, compressed), ``frames/`` (written during the
+simulation) and ``meshcat.html`` (with Meshcat).
 The CLI builds it in a temporary sibling directory and swaps it in when complete
 (:func:`lunar_drake.files.staged_directory`).
 """
@@ -35,6 +38,8 @@ LOG_FILES = {
     "flight.status": "flight_status.csv",
     "flight.pose_estimate": "pose_estimate.csv",
     "flight.pose_covariance": "pose_covariance.csv",
+    "flight.bumper": "bumper.csv",
+    "ground.pose_estimate": "ground_pose.csv",
 }
 
 
@@ -47,6 +52,9 @@ RUN_DIR_NAMES = frozenset(
         *LOG_FILES.values(),
         "telemetry.csv",
         "link.csv",
+        "modes.csv",
+        "ground_events.csv",
+        "images.csv",
         "frames",
         "meshcat.html",
     ]
@@ -65,6 +73,13 @@ def write_csv(path: Path, header, rows) -> None:
             f.write(",".join(row) + "\n")
 
 
+def _quote(text: str) -> str:
+    """A CSV field: quoted (doubling quotes) when it holds a comma or a quote."""
+    if "," in text or '"' in text:
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
 def run_files() -> list[str]:
     """The files :func:`write_run` writes (frames and Meshcat aside)."""
     return [
@@ -74,6 +89,9 @@ def run_files() -> list[str]:
         *LOG_FILES.values(),
         "telemetry.csv",
         "link.csv",
+        "modes.csv",
+        "ground_events.csv",
+        "images.csv",
     ]
 
 
@@ -126,6 +144,19 @@ def write_run(
     )
     write_csv(out / "link.csv", LINK_RECORD_FIELDS, rows)
     paths.append(out / "link.csv")
+    rows = ([f"{m.t_s:.6f}", m.before, m.after, m.reason] for m in logs.transitions)
+    write_csv(out / "modes.csv", ["t_s", "before", "after", "reason"], rows)
+    paths.append(out / "modes.csv")
+    rows = ([f"{e.t_s:.6f}", e.kind, _quote(e.detail)] for e in logs.ground_events)
+    write_csv(out / "ground_events.csv", ["t_s", "event", "detail"], rows)
+    paths.append(out / "ground_events.csv")
+    rows = (
+        [f"{tr:.6f}", f"{ts:.6f}", str(int(k)), codec, str(int(n))]
+        for tr, ts, k, codec, n in logs.images_received
+    )
+    write_csv(out / "images.csv", ["t_received_s", "t_sent_s", "frame_index", "codec", "bytes"],
+              rows)  # fmt: skip
+    paths.append(out / "images.csv")
     if meshcat_html is not None:
         paths.append(atomic_write_text(out / "meshcat.html", meshcat_html))
     return paths

@@ -32,7 +32,9 @@ from pydrake.visualization import VisualizationConfig
 
 from lunar_drake.autonomy.costmap import HazardConfig, MapConfig
 from lunar_drake.autonomy.ekf import EstimatorConfig
-from lunar_drake.comms.link import LinkConfig
+from lunar_drake.autonomy.safety import SafetyConfig
+from lunar_drake.comms.images import ImageDownlinkConfig
+from lunar_drake.comms.link import ChannelConfig, LinkConfig
 from lunar_drake.dynamics.terramechanics import SoilParams
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.models.rover_description import RoverDescription, krex2_rp
@@ -197,6 +199,10 @@ class FlightConfig:
         gimbal: mast camera pointing.
         estimator: the on-board EKF's assumptions
             (:class:`~lunar_drake.autonomy.ekf.EstimatorConfig`).
+        safety: the virtual bumper and the uplink timeout
+            (:class:`~lunar_drake.autonomy.safety.SafetyConfig`).
+        images: the camera frames sent down the ``images`` topic when the cameras are
+            on (:class:`~lunar_drake.comms.images.ImageDownlinkConfig`).
     """
 
     rate_hz: float = 50.0
@@ -204,6 +210,8 @@ class FlightConfig:
     telemetry_rate_hz: float = 1.0
     gimbal: GimbalPointingConfig = dc.field(default_factory=GimbalPointingConfig)
     estimator: EstimatorConfig = dc.field(default_factory=EstimatorConfig)
+    safety: SafetyConfig = dc.field(default_factory=SafetyConfig)
+    images: ImageDownlinkConfig = dc.field(default_factory=ImageDownlinkConfig)
 
 
 @dc.dataclass
@@ -239,6 +247,35 @@ class Goal:
     y_m: float = 0.0
 
 
+#: Operator actions a scenario may schedule (``ground.actions``).
+ACTIONS = ("goal", "stop", "resume", "drive_arc", "point_mast")
+
+
+@dc.dataclass
+class OperatorAction:
+    """An operator request at a set time (what a Python call on the ground operator does
+    in a notebook, written down so that ``scenario.yaml`` reproduces the run).
+
+    Attributes:
+        t_s: when the ground sends it (s).
+        action: goal, stop, resume, drive_arc or point_mast.
+        x_m, y_m: the goal (site frame, m).
+        speed_mps, curvature_per_m, distance_m: the arc (m/s, 1/m positive left, m).
+        pan_deg, tilt_deg: the mast pointing (deg); auto: back to automatic pointing.
+    """
+
+    t_s: float = 0.0
+    action: str = "stop"
+    x_m: float = 0.0
+    y_m: float = 0.0
+    speed_mps: float = 0.2
+    curvature_per_m: float = 0.0
+    distance_m: float = 1.0
+    pan_deg: float = 0.0
+    tilt_deg: float = 0.0
+    auto: bool = False
+
+
 @dc.dataclass
 class GroundConfig:
     """Operations software on Earth (reads only what the downlink delivers).
@@ -247,15 +284,27 @@ class GroundConfig:
         rate_hz: tick of the ground software (Hz); one command is sent per tick.
         route: the operator's drive commands, sent in order from t = 0 and run one
             after the other on board.
-        goals: operator goals; when given, the ground plans a hazard-free path through
-            them in order on its map (from the spawn point) before the drive and sends
-            one goto command per goal instead of the route.
+        goals: operator goals; when given, they replace the route: the ground drives
+            them one at a time, planning a hazard-free path on its map from its pose
+            estimate and replanning (:mod:`lunar_drake.autonomy.operations`).
+        actions: scheduled operator requests (:class:`OperatorAction`).
         goal_tolerance_m: a goal is reached when the true position comes within this
-            distance (m; scoring).
+            distance (m; scoring); the ground judges its own goals done when the
+            downlinked estimate is this close.
         goto_tolerance_m: on board, a goto ends when the *estimate* is this close to
             its goal (m); smaller than ``goal_tolerance_m`` so that the estimate's drift
             has room.
         drive_speed_mps: goto driving speed (m/s).
+        heartbeat_s: send a keep-alive when nothing else went up for this long (s).
+        auto_resume: resume a safed rover (and replan) without waiting for a person.
+        max_resumes: at most this many automatic resumes in a run.
+        max_replans: replans of one goal before the ground gives it up.
+        replan_deviation_m: stop and replan when the ground's estimate is this far off
+            the planned path (m).
+        max_extrapolation_s: the ground carries the downlinked pose forward along the
+            commanded twist for at most this long (s).
+        ack_timeout_s: a goto that telemetry has not acknowledged after this long is
+            taken as lost and sent again, replanned (s).
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
             (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
@@ -264,9 +313,17 @@ class GroundConfig:
     rate_hz: float = 10.0
     route: list[RouteSegment] = dc.field(default_factory=_default_route)
     goals: list[Goal] = dc.field(default_factory=list)
+    actions: list[OperatorAction] = dc.field(default_factory=list)
     goal_tolerance_m: float = 1.0
     goto_tolerance_m: float = 0.2
     drive_speed_mps: float = 0.2
+    heartbeat_s: float = 5.0
+    auto_resume: bool = True
+    max_resumes: int = 3
+    max_replans: int = 3
+    replan_deviation_m: float = 2.0
+    max_extrapolation_s: float = 10.0
+    ack_timeout_s: float = 20.0
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
 
@@ -295,12 +352,30 @@ class LineOfSightConfig:
         check_range("min_margin_deg", self.min_margin_deg, -90.0, 90.0, unit=" deg")
 
 
+def _default_downlink() -> LinkConfig:
+    # Housekeeping on one channel, camera frames on their own (a 1280 x 960 16-bit PNG
+    # is about 1.5 MB: the bucket must hold the largest message). Placeholder figures.
+    return LinkConfig(
+        channels=[
+            ChannelConfig(name="main"),
+            ChannelConfig(
+                name="images",
+                bandwidth_bps=2.0e6,
+                bucket_bytes=8_000_000,
+                queue_limit_bytes=32_000_000,
+                topics=["images"],
+            ),
+        ]
+    )
+
+
 @dc.dataclass
 class CommsConfig:
-    """The Earth-Moon link, one config per direction, and the line of sight to Earth."""
+    """The Earth-Moon link, one config per direction, and the line of sight to Earth.
+    The downlink's default has a ``main`` channel and an ``images`` channel."""
 
     uplink: LinkConfig = dc.field(default_factory=LinkConfig)
-    downlink: LinkConfig = dc.field(default_factory=LinkConfig)
+    downlink: LinkConfig = dc.field(default_factory=_default_downlink)
     line_of_sight: LineOfSightConfig = dc.field(default_factory=LineOfSightConfig)
 
 
@@ -414,6 +489,8 @@ def validate_scenario(s: Scenario) -> None:
     check_range("flight.telemetry_rate_hz", f.telemetry_rate_hz, 0.001, 100.0, unit=" Hz")
     _section("flight.gimbal", f.gimbal.validate)
     _section("flight.estimator", f.estimator.validate)
+    _section("flight.safety", f.safety.validate)
+    _section("flight.images", f.images.validate)
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
     check_range("ground.goal_tolerance_m", s.ground.goal_tolerance_m, 0.05, 100.0, unit=" m")
@@ -422,6 +499,7 @@ def validate_scenario(s: Scenario) -> None:
     for k, g in enumerate(s.ground.goals):
         check_range(f"ground.goals[{k}].x_m", g.x_m, -1e6, 1e6, unit=" m")
         check_range(f"ground.goals[{k}].y_m", g.y_m, -1e6, 1e6, unit=" m")
+    _validate_ground(s.ground)
     _section("ground.map", s.ground.map.validate)
     _section("ground.hazards", s.ground.hazards.validate)
     _section("comms.uplink", s.comms.uplink.validate)
@@ -439,6 +517,31 @@ def validate_scenario(s: Scenario) -> None:
     check_range(
         "plant_config.time_step", s.plant_config.time_step, 0.0, 1.0, lo_open=True, unit=" s"
     )
+
+
+def _validate_ground(g: GroundConfig) -> None:
+    check_range("ground.heartbeat_s", g.heartbeat_s, 0.1, 3600.0, unit=" s")
+    check_range("ground.max_resumes", g.max_resumes, 0, 1000)
+    check_range("ground.max_replans", g.max_replans, 0, 1000)
+    check_range("ground.replan_deviation_m", g.replan_deviation_m, 0.1, 1000.0, unit=" m")
+    check_range("ground.max_extrapolation_s", g.max_extrapolation_s, 0.0, 3600.0, unit=" s")
+    check_range("ground.ack_timeout_s", g.ack_timeout_s, 1.0, 3600.0, unit=" s")
+    for k, a in enumerate(g.actions):
+        key = f"ground.actions[{k}]"
+        if a.action not in ACTIONS:
+            raise ConfigError(f"{key}.action = {a.action!r} is unknown; choose one of {ACTIONS}")
+        check_range(f"{key}.t_s", a.t_s, 0.0, 1.0e7, unit=" s")
+        if a.action == "goal":
+            check_range(f"{key}.x_m", a.x_m, -1e6, 1e6, unit=" m")
+            check_range(f"{key}.y_m", a.y_m, -1e6, 1e6, unit=" m")
+        if a.action == "drive_arc":
+            check_range(f"{key}.speed_mps", abs(a.speed_mps), 0.0, 1.0, lo_open=True,
+                        unit=" m/s (absolute)")  # fmt: skip
+            check_range(f"{key}.curvature_per_m", a.curvature_per_m, -10.0, 10.0, unit=" 1/m")
+            check_range(f"{key}.distance_m", a.distance_m, 0.0, 1000.0, lo_open=True, unit=" m")
+        if a.action == "point_mast":
+            check_range(f"{key}.pan_deg", a.pan_deg, -360.0, 360.0, unit=" deg")
+            check_range(f"{key}.tilt_deg", a.tilt_deg, -180.0, 180.0, unit=" deg")
 
 
 def _validate_terrain(t: TerrainConfig) -> None:

@@ -27,6 +27,7 @@ from lunar_drake.errors import SimulationError
 from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.body_pose_vector import BodyPoseVector
+from lunar_drake.systems.command_executor import STATUS_FIELDS
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
 
 _WHEELS = ("fl", "fr", "rl", "rr")
@@ -44,7 +45,8 @@ LOGGED_PORTS = {
     "rover.wheel_encoders": tuple(f"{w}_angle_rad" for w in _WHEELS),
     "flight.twist_command": ("vx_mps", "vy_mps", "wz_radps"),
     "flight.brake_command": ("brake",),
-    "flight.status": ("mode", "command_seq"),
+    "flight.status": STATUS_FIELDS,
+    "flight.bumper": ("trip",),
     "flight.pose_estimate": ("x_m", "y_m", "z_rel_m", "roll_rad", "pitch_rad", "yaw_rad"),
     # Row-major 6 x 6 covariance of [position (m), world-frame attitude error (rad)].
     "flight.pose_covariance": tuple(
@@ -52,6 +54,7 @@ LOGGED_PORTS = {
         for a in ("x", "y", "z", "rx", "ry", "rz")
         for b in ("x", "y", "z", "rx", "ry", "rz")
     ),
+    "ground.pose_estimate": ("x_m", "y_m", "z_rel_m", "roll_rad", "pitch_rad", "yaw_rad"),
 }
 
 
@@ -92,6 +95,14 @@ class SimulationLogs:
         telemetry: what the ground received (:class:`ReceivedTelemetry`).
         link: every message over the uplink and downlink
             (:class:`~lunar_drake.comms.link.LinkRecord`).
+        transitions: every on-board mode change
+            (:class:`~lunar_drake.autonomy.commands.Transition`).
+        ground_events: what the ground did and saw
+            (:class:`~lunar_drake.autonomy.operations.Event`).
+        ground_goals: every goal the ground was given ((x, y) m) and its status on the
+            ground (:data:`~lunar_drake.autonomy.operations.GOAL_STATUS`).
+        images_received: the stereo frames the ground received, (t_received_s,
+            t_sent_s, frame_index, codec, bytes) each.
         frames_written: camera frames written to ``frames_dir``.
         wall: wall-clock timing (s; not deterministic).
     """
@@ -104,6 +115,10 @@ class SimulationLogs:
     link: list
     frames_written: int
     wall: dict
+    transitions: list = dc.field(default_factory=list)
+    ground_events: list = dc.field(default_factory=list)
+    ground_goals: list = dc.field(default_factory=list)
+    images_received: list = dc.field(default_factory=list)
 
 
 StopCheck = Callable[[float, np.ndarray], "str | None"]
@@ -271,6 +286,18 @@ def simulate(
         sys = mission.GetSubsystemByName(name)
         link += sys.records(sys.GetMyContextFromRoot(root))
     frames = writer.frames_written(writer.GetMyContextFromRoot(root)) if writer else 0
+    executor = mission.GetSubsystemByName("flight").GetSubsystemByName("flight.executor")
+    transitions = executor.executor_state(executor.GetMyContextFromRoot(root)).transitions.items()
+    operator = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")
+    ops = operator.operator_state(root)
+    images = []
+    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.images"):
+        rx = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.images")
+        images = [
+            (d.t_received_s, d.message.t_sent_s, d.message.payload.frame_index,
+             d.message.payload.codec, d.message.size_bytes)
+            for d in rx.received(rx.GetMyContextFromRoot(root))
+        ]  # fmt: skip
     return SimulationLogs(
         simulated_s=simulated,
         stop_reason=stop_reason[0],
@@ -279,6 +306,10 @@ def simulate(
         telemetry=telemetry,
         link=link,
         frames_written=frames,
+        transitions=transitions,
+        ground_events=ops.events.items(),
+        ground_goals=[(g, st) for g, st in zip(ops.goals, ops.status, strict=True)],
+        images_received=images,
         wall={
             "build_s": t_built - t0,
             "simulate_s": t_sim - t_built,

@@ -171,3 +171,30 @@ def test_mission_estimate_is_consistent_and_heading_needs_the_star_tracker(small
     (_, sig_t), (_, sig_b) = out["tracker"][:2], out["blind"][:2]
     assert sig_t[10:].max() < math.radians(0.02)
     assert np.all(np.diff(sig_b[10:]) > 0) and sig_b[-1] > 50 * sig_t[-1]
+
+
+def test_slip_vs_slope_scales_the_odometry_with_the_climb_along_the_travel():
+    """Climbing 4 deg with table slips 0.08 (level) and 0.14 (4 deg): the step is
+    (1 - prior - 0.06) of the encoder's; descending or backing down it uses the table's
+    negative side; the validation wants increasing slopes with 0 among them."""
+    from lunar_drake.autonomy.ekf import (
+        EstimatorConfig,
+        initial_state,
+        predict,
+        slope_slip,
+    )
+    from lunar_drake.errors import ConfigError
+    from lunar_drake.rotations import rotation_exp
+
+    table = [[-4.0, 0.02], [0.0, 0.08], [4.0, 0.14]]
+    R_up = rotation_exp([0.0, -math.radians(4.0), 0.0])  # nose up: climbing forward
+    assert slope_slip(R_up, 0.1, table) == pytest.approx(0.06)
+    assert slope_slip(R_up, -0.1, table) == pytest.approx(-0.06)  # backing down it
+    assert slope_slip(np.eye(3), 0.1, table) == 0.0
+    cfg = EstimatorConfig(slip_prior=0.1, slip_vs_slope=table)
+    half = -math.radians(2.0)  # a 4 deg nose-up pitch
+    x, P = initial_state(p0=[0, 0, 0], q0=[math.cos(half), 0, math.sin(half), 0], config=cfg)
+    xn, _ = predict(x, P, gyro_radps=np.zeros(3), d_body=(1.0, 0.0), dt=0.01, config=cfg)
+    assert np.linalg.norm(xn[:3]) == pytest.approx(1.0 - 0.1 - 0.06, rel=1e-9)
+    with pytest.raises(ConfigError, match="must increase and include 0"):
+        EstimatorConfig(slip_vs_slope=[[1.0, 0.1], [4.0, 0.2]])

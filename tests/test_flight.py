@@ -55,7 +55,12 @@ def test_executor_runs_commands_in_order_for_their_durations():
     # ticks 0-4 still, 5-14 vx 0.3, 15-19 wz, then nothing left
     np.testing.assert_array_equal(vx, [0.0] * 5 + [0.3] * 10 + [0.0] * 15)
     np.testing.assert_array_equal(wz, [0.0] * 15 + [0.05] * 5 + [0.0] * 10)
-    assert [o.mode for o in out[:1] + out[5:6] + out[29:]] == ["holding", "driving", "idle"]
+    # A zero-twist drive command still runs (driving, standing still); then waiting.
+    assert [o.mode for o in out[:1] + out[5:6] + out[29:]] == ["driving", "driving", "waiting"]
+    assert [(m.before, m.after) for m in state.transitions.items()] == [
+        ("idle", "driving"),
+        ("driving", "waiting"),
+    ]
     assert state.last_seq == 2 and state.queue == ()
 
 
@@ -78,7 +83,7 @@ def test_stop_clears_the_queue_and_old_messages_are_ignored():
     assert out[-1].twist[0] == 0.0 and state.queue == () and state.active is None
     state, out = _run(state, d + stop, range(5, 7))  # redelivered: not run again
     assert out[-1].twist[0] == 0.0 and state.last_seq == 2
-    assert MODES.index(out[-1].mode) == 0
+    assert MODES.index(out[-1].mode) == MODES.index("waiting")
 
 
 @pytest.mark.parametrize("preset", ["krex2_rp", "husky_rp"])

@@ -40,7 +40,7 @@ def test_executor_runs_a_goto_until_the_estimate_is_at_the_goal_then_the_next():
     assert out.mode == "driving" and out.twist[0] == pytest.approx(0.2)
     st, out = executor_step(st, msgs, tick=1, rate_hz=10.0, brake_delay_s=0.5,
                             pose=(4.8, 0.0, 0.0))  # fmt: skip
-    assert out.mode == "idle" and np.all(out.twist == 0.0) and st.active is None
+    assert out.mode == "waiting" and np.all(out.twist == 0.0) and st.active is None
     with pytest.raises(ValueError, match="pose estimate"):
         executor_step(ExecutorState(), msgs, tick=0, rate_hz=10.0, brake_delay_s=0.5)
 
@@ -62,8 +62,23 @@ def test_mission_drives_to_the_goal_through_the_link(cache):
     assert goal["final_distance_m"] < 1.0
     assert summary["rover"]["max_tilt_deg"] < 15.0
     up = [r for r in logs.link if r.direction == "uplink"]
-    assert len(up) == 1 and up[0].bytes >= 4 + 24 + 16 * 2  # the planned path went up
-    assert 1.25 < up[0].t_received - up[0].t_sent < 1.40  # light time + ground processing
+    gotos = [r for r in up if r.bytes > 4]  # the rest are 4-byte heartbeats
+    assert len(gotos) == 1 and gotos[0].bytes >= 4 + 24 + 16 * 2  # the planned path went up
+    assert 1.25 < gotos[0].t_received - gotos[0].t_sent < 1.40  # light time + processing
+    heartbeats = [r.t_sent for r in up if r.bytes == 4]
+    assert len(heartbeats) > 10 and max(np.diff(heartbeats)) <= 5.0 + 1e-9
+    # The mode manager: idle -> driving -> waiting, and the ground saw both changes.
+    assert [(m["before"], m["after"]) for m in summary["modes"]["transitions"]] == [
+        ("idle", "driving"),
+        ("driving", "waiting"),
+    ]
+    assert summary["modes"]["seen_by_ground"] == 2
+    # The ground judged the goal reached from telemetry alone, and its pose estimate
+    # (downlinked, carried forward) ends on the rover's.
+    assert summary["ground"]["goals"] == [{"goal_xy_m": [9.0, 0.0], "status": "reached"}]
+    ground_xy = logs.vectors["ground.pose_estimate"].data[-1, :2]
+    truth_xy = logs.vectors["truth.pose"].data[-1, :2]
+    assert np.hypot(*(ground_xy - truth_xy)) < 1.0
 
 
 @pytest.mark.parametrize(

@@ -100,6 +100,42 @@ def test_token_bucket_never_exceeds_the_bandwidth_over_any_window():
     assert (c[-1] - c[1]) / span == pytest.approx(1000.0, rel=0.05)
 
 
+def test_a_bandwidth_schedule_is_never_exceeded_over_any_window():
+    """Rate steps 1000 -> 250 -> 2000 B/s under saturating traffic: over every window the
+    bytes sent stay within bucket + the rate's integral, computed here by fine quadrature
+    of the step function (not the link's own integral), and each segment runs at its
+    rate."""
+    steps = [core.RateStep(start_s=20.0, bandwidth_bps=2000.0),
+             core.RateStep(start_s=45.0, bandwidth_bps=16000.0)]  # fmt: skip
+    ch = core.ChannelConfig(bandwidth_bps=8000.0, bucket_bytes=3000, queue_limit_bytes=10**9,
+                            schedule=steps)  # fmt: skip
+    cfg = LinkConfig(delay_s=1.0, channels=[ch])
+    rows, _ = _run(cfg, _traffic(300, seed=4))
+    t_dep = np.array([r.t_received - 1.0 for r in rows])
+    size = np.array([r.bytes for r in rows], dtype=float)
+    assert np.all(np.diff(t_dep) >= -1e-12)
+    grid = np.linspace(0.0, t_dep[-1] + 1.0, 400001)
+    rate = np.where(grid < 20.0, 1000.0, np.where(grid < 45.0, 250.0, 2000.0))
+    cum_rate = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(grid))))
+    R = np.interp(t_dep, grid, cum_rate)
+    c = np.concatenate(([0.0], np.cumsum(size)))
+    for i in range(len(t_dep)):
+        sent = c[i + 1 :] - c[i]
+        assert np.all(sent <= 3000 + (R[i:] - R[i]) + 0.5), i  # 0.5 B: the quadrature
+    for lo, hi, r in ((25.0, 44.0, 250.0), (50.0, t_dep[-1], 2000.0)):
+        k = (t_dep >= lo) & (t_dep <= hi)
+        assert size[k][1:].sum() / (t_dep[k][-1] - t_dep[k][0]) == pytest.approx(r, rel=0.08)
+
+
+def test_a_bad_schedule_is_a_one_line_error():
+    from lunar_drake.errors import ConfigError, OutOfRangeError
+
+    with pytest.raises(ConfigError, match=r"schedule\[1\].start_s = 5 s must be after"):
+        core.ChannelConfig(schedule=[core.RateStep(10.0, 1e3), core.RateStep(5.0, 1e3)]).validate()
+    with pytest.raises(OutOfRangeError, match=r"schedule\[0\].bandwidth_bps"):
+        core.ChannelConfig(schedule=[core.RateStep(10.0, 0.0)]).validate()
+
+
 def test_fifo_per_channel_with_jitter_and_per_topic_delays_and_jitter_bounds():
     msgs = _traffic(400, seed=2, topics=("telemetry", "images"), max_bytes=200)
     cfg = LinkConfig(
@@ -304,3 +340,44 @@ def test_mission_link_from_the_scenario_drops_counts_and_round_trips(small_site)
     assert all(got[k] > 5.0 for k in set(got) - set(ground))
     again = simulate(scenario=scenario, site=site, progress=False)
     assert again.link == logs.link
+
+
+def test_camera_frames_go_down_compressed_and_pay_for_their_real_bytes(small_site):
+    """PNG frames round-trip exactly; JPEG ones are smaller and lossy; in the mission each
+    stereo frame is charged its encoded bytes, on the images channel, whose bucket and
+    bandwidth hold over every window."""
+    import cv2
+
+    from lunar_drake.comms.images import ImageDownlinkConfig, decode_frame, encode_frame
+    from lunar_drake.scenario_files import apply_overrides
+    from lunar_drake.simulation import simulate
+
+    rng = np.random.default_rng(5)
+    raw = (rng.normal(1500, 300, (96, 128)).clip(0, 4095)).astype(np.uint16)
+    png = encode_frame(raw, config=ImageDownlinkConfig(codec="png"))
+    assert np.array_equal(decode_frame(png, codec="png"), raw)
+    assert len(png) == len(cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, 3])[1])
+    jpg = encode_frame(raw, config=ImageDownlinkConfig(codec="jpeg", jpeg_quality=80))
+    back = decode_frame(jpg, codec="jpeg")
+    assert len(jpg) < len(png) and np.abs(back.astype(float) - raw).mean() < 200.0
+
+    scenario, site = small_site
+    scenario = apply_overrides(
+        scenario,
+        "{simulation_duration: 12.0, sensors: {camera: {rate_hz: 0.5, width: 160, height: 120}},"
+        " comms: {downlink: {delay_s: 1.0, channels: [{name: main},"
+        " {name: images, bandwidth_bps: 64000.0, bucket_bytes: 60000, topics: [images]}]}}}",
+    )
+    logs = simulate(scenario=scenario, site=site)
+    rows = [r for r in logs.link if r.topic == "images"]
+    got = [r for r in rows if not r.dropped and np.isfinite(r.t_received)]
+    assert len(rows) == 6 and all(r.channel == "images" for r in rows)
+    sizes = [r.bytes for r in rows]
+    assert min(sizes) > 24 + 2 * 5000  # two 160 x 120 16-bit PNGs of a textured scene
+    # Token bucket: bytes leaving in [t_i, t_j] <= bucket + rate (t_j - t_i).
+    t_dep = np.array([r.t_received - 1.0 for r in got])
+    c = np.concatenate(([0.0], np.cumsum([r.bytes for r in got])))
+    for i in range(len(got)):
+        assert np.all(c[i + 1 :] - c[i] <= 60000 + 8000.0 * (t_dep[i:] - t_dep[i]) + 1e-6)
+    assert any(r.t_received - r.t_sent > 1.5 for r in got)  # queued behind the bandwidth
+    assert [x[2] for x in logs.images_received] == [int(r.seq) for r in got]

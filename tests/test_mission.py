@@ -144,9 +144,10 @@ def test_cli_terrain_synth_writes_everything(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_default_rover_drives_100_m_over_the_default_site(cache):
-    """The default mission (about 100 m over the synthesized site, craters and rocks
-    included, commanded over the link) with no blow-up, tipping or sinking, and the
-    parked rover holding still at the end."""
+    """The default mission (three operator goals about 100 m over the synthesized site,
+    craters and rocks included, planned on the ground and driven through the link)
+    drives to every goal (within the estimate's drift) with no hazard strike, blow-up,
+    tipping or sinking, and the parked rover holds still at the end."""
     from lunar_drake import metrics
     from lunar_drake.scenario_files import apply_overrides
     from lunar_drake.simulation import simulate
@@ -160,7 +161,7 @@ def test_default_rover_drives_100_m_over_the_default_site(cache):
     summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
     rv = summary["rover"]
     assert summary["stop_reason"] == "duration reached"
-    assert rv["distance_m"] >= 100.0
+    assert rv["distance_m"] >= 90.0  # the string-pulled path: 94 m
     assert rv["max_tilt_deg"] < 20.0
     assert rv["max_sinkage_m"] < 0.05
     truth = logs.vectors["truth.pose"].data
@@ -173,4 +174,12 @@ def test_default_rover_drives_100_m_over_the_default_site(cache):
     assert clearance.min() > 0.2 and clearance.max() < 1.0  # never airborne
     assert np.abs(truth[:, 6:9]).max() < 1.0  # no blow-up (m/s)
     assert summary["parked"] is not None and summary["parked"]["drift_m"] < 0.01
-    assert summary["link"]["uplink"]["delivered"] == len(scenario.ground.route)
+    assert summary["link"]["uplink"]["dropped"] == 0
+    # The ground judged every goal reached on the downlinked estimate; truth agrees
+    # within the estimate's drift (no position fix on board: 2-4 % of the distance).
+    assert [g["status"] for g in summary["ground"]["goals"]] == ["reached"] * 3
+    assert summary["goals"][0]["reached"]
+    drift = summary["localization"]["final_position_error_m"]
+    assert all(g.get("final_distance_m", g["closest_m"]) < drift + 1.0 for g in summary["goals"])
+    assert drift < 0.05 * rv["distance_m"]
+    assert summary["hazards"]["strikes"] == 0 and summary["modes"]["safings"] == {}

@@ -200,7 +200,7 @@ def test_parked_rover_holds_on_a_side_slope(cache):
             scenario_name=rover,
             scenario_text="{simulation_duration: 30.0, rover: {spawn_x_m: -3.0},"
             " sensors: {camera: {enabled: false}},"
-            " ground: {route: [{duration_s: 1.0}, {duration_s: 5.0, vx_mps: 0.2}]}}",
+            " ground: {goals: [], route: [{duration_s: 1.0}, {duration_s: 5.0, vx_mps: 0.2}]}}",
         )
         logs = simulate(scenario=scenario, site=site)
         parked = metrics.parked_drift(logs)

@@ -13,7 +13,7 @@ import re
 import numpy as np
 import pytest
 
-from lunar_drake.diagrams.flight import FLIGHT_INPUTS, MakeFlightDiagram
+from lunar_drake.diagrams.flight import IMAGE_INPUTS, MakeFlightDiagram, flight_inputs
 from lunar_drake.diagrams.ground import GROUND_INPUTS, MakeGroundDiagram
 from lunar_drake.diagrams.mission import MakeMissionDiagram
 from lunar_drake.diagrams.plant import SENSOR_PORTS, TRUTH_PORTS
@@ -49,9 +49,10 @@ def test_factories_name_their_diagrams_and_ports(mission):
     outs = {p.get_name() for p in _ports(plant, "output")}
     assert set(SENSOR_PORTS) <= outs and set(TRUTH_PORTS) <= outs
     flight = MakeFlightDiagram(scenario=scenario)
-    assert {p.get_name() for p in _ports(flight, "input")} == set(FLIGHT_INPUTS)
+    assert {p.get_name() for p in _ports(flight, "input")} == set(flight_inputs(scenario))
+    assert set(IMAGE_INPUTS) <= set(flight_inputs(scenario))  # the small site has cameras
     ground = MakeGroundDiagram(scenario=scenario)
-    assert {p.get_name() for p in _ports(ground, "input")} == set(GROUND_INPUTS)
+    assert {p.get_name() for p in _ports(ground, "input")} == {*GROUND_INPUTS, "downlink.images"}
 
 
 def _sources(diagram, sub):
@@ -69,15 +70,16 @@ def _sources(diagram, sub):
 
 
 def test_flight_reads_only_sensors_and_the_uplink(mission):
-    diagram, _ = mission
+    diagram, scenario = mission
     sources = _sources(diagram, "flight")
-    assert set(sources) == set(FLIGHT_INPUTS)  # every input is fed
+    assert set(sources) == set(flight_inputs(scenario))  # every input is fed
     for port, (src, src_port) in sources.items():
         assert not src_port.startswith("truth."), port
         if port == "uplink.commands":
             assert src == "uplink"
         else:
-            assert (src, src_port) == ("plant", port) and src_port in SENSOR_PORTS
+            assert (src, src_port) == ("plant", port)
+            assert src_port in SENSOR_PORTS or src_port in IMAGE_INPUTS  # camera sensor
     # The flight diagram holds no plant (it is built from the scenario alone).
     flight = diagram.GetSubsystemByName("flight")
     kinds = {type(s).__name__ for s in flight.GetSystems()}
@@ -86,12 +88,16 @@ def test_flight_reads_only_sensors_and_the_uplink(mission):
 
 def test_ground_reads_only_the_downlink(mission):
     diagram, _ = mission
-    assert _sources(diagram, "ground") == {"downlink.telemetry": ("downlink", "telemetry")}
+    assert _sources(diagram, "ground") == {
+        "downlink.telemetry": ("downlink", "telemetry"),
+        "downlink.images": ("downlink", "images"),
+    }
     # The links read their producers and, for loss of signal, the plant's radio path.
     radio = {"earth_visible": ("plant", "radio.earth_visible")}
     assert _sources(diagram, "uplink") == {"commands": ("ground", "uplink.commands"), **radio}
     assert _sources(diagram, "downlink") == {
         "telemetry": ("flight", "downlink.telemetry"),
+        "images": ("flight", "downlink.images"),
         **radio,
     }
 

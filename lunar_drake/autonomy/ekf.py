@@ -32,11 +32,12 @@ are small).
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
 
 import dataclasses as dc
+import itertools
 import math
 
 import numpy as np
 
-from lunar_drake.errors import check_range
+from lunar_drake.errors import ConfigError, check_range
 
 N_ERR = 14
 _P, _TH, _BG, _S, _B, _BA = slice(0, 3), slice(3, 6), slice(6, 9), 9, 10, slice(11, 14)
@@ -71,6 +72,13 @@ class EstimatorConfig:
             length (horizontal, each axis). odometry_vertical_fraction: same, vertical.
         slip_prior, slip_sigma0: the odometry slip assumed at the start (e.g. from
             the slip study on this soil) and its sigma (-).
+        slip_vs_slope: optional ``[[slope_deg, slip], ...]`` (slopes increasing, 0
+            among them): how slip changes when climbing (positive) or descending
+            (negative) along the direction of travel, e.g. ``reference_slip`` from
+            ``lunar-drake slip-study`` on this soil. The filter adds ``table(climb) -
+            table(0)`` to its slip state (whose prior stays ``slip_prior``: the level
+            slip on this terrain, roughness included); the climb comes from the
+            estimated attitude; interpolated linearly, held at the ends.
         slip_random_walk_per_sqrt_m: slip random walk (1/sqrt(m) of driving).
         side_slip_sigma0, side_slip_random_walk_per_sqrt_m: the same for the side slip
             (prior mean 0).
@@ -97,6 +105,7 @@ class EstimatorConfig:
     odometry_vertical_fraction: float = 0.05
     slip_prior: float = 0.1
     slip_sigma0: float = 0.08
+    slip_vs_slope: list[list[float]] = dc.field(default_factory=list)
     slip_random_walk_per_sqrt_m: float = 0.01
     side_slip_sigma0: float = 0.02
     side_slip_random_walk_per_sqrt_m: float = 0.005
@@ -125,6 +134,16 @@ class EstimatorConfig:
         check_range("odometry_vertical_fraction", self.odometry_vertical_fraction, 0.0, 1.0)
         check_range("slip_prior", self.slip_prior, -1.0, 1.0, hi_open=True)
         check_range("slip_sigma0", self.slip_sigma0, 0.0, 1.0)
+        table = self.slip_vs_slope
+        if table:
+            if any(len(row) != 2 for row in table):
+                raise ConfigError(f"slip_vs_slope = {table!r}: rows must be [slope_deg, slip]")
+            deg = [float(r[0]) for r in table]
+            if any(b <= a for a, b in itertools.pairwise(deg)) or 0.0 not in deg:
+                raise ConfigError(f"slip_vs_slope slopes {deg!r} must increase and include 0")
+            for k, (d, v) in enumerate(table):
+                check_range(f"slip_vs_slope[{k}] slope", d, -60.0, 60.0, unit=" deg")
+                check_range(f"slip_vs_slope[{k}] slip", v, -1.0, 1.0, hi_open=True)
         check_range("slip_random_walk_per_sqrt_m", self.slip_random_walk_per_sqrt_m, 0.0, 1.0)
         check_range("side_slip_sigma0", self.side_slip_sigma0, 0.0, 1.0)
         check_range("side_slip_random_walk_per_sqrt_m", self.side_slip_random_walk_per_sqrt_m,
@@ -216,11 +235,23 @@ def initial_state(*, p0, q0, config: EstimatorConfig) -> tuple[np.ndarray, np.nd
     return x, P
 
 
+def slope_slip(R_WB, dx: float, table) -> float:
+    """The slip change ``table(climb) - table(0)`` ([[slope_deg, slip], ...]) for the
+    climb along the direction of travel: the chassis x axis' elevation, signed by the
+    direction of the step ``dx`` (m; backwards flips it)."""
+    sin_climb = float(R_WB[2, 0]) * (1.0 if dx >= 0.0 else -1.0)
+    climb_deg = math.degrees(math.asin(max(-1.0, min(1.0, sin_climb))))
+    t = np.asarray(table, dtype=float)
+    return float(np.interp(climb_deg, t[:, 0], t[:, 1]) - np.interp(0.0, t[:, 0], t[:, 1]))
+
+
 def predict(x, P, *, gyro_radps, d_body, dt: float, config: EstimatorConfig):
     """(x, P) after one tick: gyro rate (3,) (rad/s, body), encoder displacement
     ``d_body`` = (dx, dy) (m, body frame) over the tick, ``dt`` (s)."""
     p, R, bg, s, beta = x[0:3], quat_to_matrix(x[3:7]), x[7:10], x[10], x[11]
     u = np.array([float(d_body[0]), float(d_body[1]), 0.0])
+    if config.slip_vs_slope:
+        s = s + slope_slip(R, u[0], config.slip_vs_slope)
     Ru = R @ u
     Rside = R @ np.array([0.0, u[0], 0.0])
     g = 1.0 - s

@@ -68,8 +68,12 @@ def _simplify(costmap: Costmap, cells: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def plan_path(*, costmap: Costmap, start_xy, goal_xy) -> Path:
+def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float = 0.0) -> Path:
     """The least-cost path from ``start_xy`` to ``goal_xy`` (site, m).
+
+    The rover may stand in a hazard's inflation (an estimate near a rock, a replan after
+    safing): its own cell, and lethal cells within ``start_free_radius_m`` of the start,
+    cost 50 per metre instead of lethal, so the path leaves them by the shortest way.
 
     Raises:
         OutOfBoundsError: start or goal off the map.
@@ -85,10 +89,18 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy) -> Path:
             "within the rover's footprint of one)"
         )
     cost = costmap.cost
-    if not np.isfinite(cost[s]):
-        # The rover may stand next to a hazard: let it leave its own cell.
+    k = math.ceil(start_free_radius_m / costmap.resolution_m)
+    r0, r1 = max(0, s[0] - k), min(cost.shape[0], s[0] + k + 1)
+    c0, c1 = max(0, s[1] - k), min(cost.shape[1], s[1] + k + 1)
+    win = cost[r0:r1, c0:c1]
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    near = np.hypot(rr - s[0], cc - s[1]) * costmap.resolution_m <= start_free_radius_m
+    if not np.isfinite(win[near]).all() or not np.isfinite(cost[s]):
         cost = cost.copy()
-        cost[s] = 1.0
+        sub = cost[r0:r1, c0:c1]
+        sub[near & ~np.isfinite(sub)] = 50.0
+        if not np.isfinite(cost[s]):
+            cost[s] = 50.0
     mcp = MCP_Geometric(cost, fully_connected=True)
     cum, _ = mcp.find_costs([s], [g])
     if not np.isfinite(cum[g]):

@@ -6,7 +6,10 @@ import numpy as np
 
 #: Fields of a telemetry packet, in order (units in the names; mode is an index into
 #: :data:`~lunar_drake.autonomy.commands.MODES`; command_seq is the newest command
-#: handled, -1 for none).
+#: handled, -1 for none; safe_reason an index into
+#: :data:`~lunar_drake.autonomy.commands.SAFE_REASONS`; mode_changes counts every mode
+#: transition on board since the start, so the ground sees one it missed between packets;
+#: motion_seq is the seq of the newest drive or goto command accepted, -1 for none).
 TELEMETRY_FIELDS = (
     "x_m",
     "y_m",
@@ -20,15 +23,25 @@ TELEMETRY_FIELDS = (
     "brake",
     "mode",
     "command_seq",
+    "safe_reason",
+    "mode_changes",
+    "motion_seq",
 )
 
 
-def pack_telemetry(*, pose_estimate, twist_command, brake, mode, command_seq) -> np.ndarray:
-    """A telemetry packet (see :data:`TELEMETRY_FIELDS`)."""
+def pack_telemetry(*, pose_estimate, twist_command, brake, status) -> np.ndarray:
+    """A telemetry packet (see :data:`TELEMETRY_FIELDS`); ``status`` is the executor's
+    (mode, command_seq, safe_reason, mode_changes, motion_seq)."""
     return np.concatenate(
         [
             np.asarray(pose_estimate, np.float64)[:6],
             np.asarray(twist_command, np.float64)[:3],
-            [float(brake), float(mode), float(command_seq)],
+            [float(brake)],
+            np.asarray(status, np.float64)[:5],
         ]
     )
+
+
+def field(packet, name: str) -> float:
+    """One field of a telemetry packet."""
+    return float(packet[TELEMETRY_FIELDS.index(name)])

@@ -12,7 +12,11 @@ Model (per direction; :class:`LinkConfig`)
   fixed when the link takes it (nothing taken later can delay it), so it is computed
   in closed form: ``t_ready = max(t_sent, previous departure)``, tokens then
   ``min(B, tokens + r (t_ready - t_prev))``, departure ``t_ready`` or
-  ``t_ready + (S - tokens) / r``.
+  ``t_ready + (S - tokens) / r``. A **bandwidth schedule** (``schedule``: rate steps
+  from set times, e.g. a ground station handover or a lower-rate antenna) makes ``r``
+  piecewise constant in time: the tokens accrue by the rate's integral and the
+  departure is where that integral reaches the shortfall (still closed form, per
+  segment).
 * **Queue limit.** A message is refused (dropped, ``queue_full``) if the bytes waiting
   to depart when it arrives, plus its own, exceed ``queue_limit_bytes``; one larger
   than ``bucket_bytes`` can never depart and is dropped (``oversize``).
@@ -65,6 +69,14 @@ DROP_REASONS = ("queue_full", "oversize", "outage", "no_line_of_sight", "loss")
 
 
 @dc.dataclass
+class RateStep:
+    """From ``start_s`` (s) on, a channel's bandwidth is ``bandwidth_bps`` (bit/s)."""
+
+    start_s: float = 0.0
+    bandwidth_bps: float = 1.0e6
+
+
+@dc.dataclass
 class ChannelConfig:
     """A logical channel of one link direction.
 
@@ -75,6 +87,8 @@ class ChannelConfig:
             bytes, >= 1.
         queue_limit_bytes: bytes that may wait to depart, >= 1.
         topics: the topics this channel carries.
+        schedule: bandwidth steps (:class:`RateStep`, start times increasing); before
+            the first, ``bandwidth_bps``.
     """
 
     name: str = "main"
@@ -82,8 +96,18 @@ class ChannelConfig:
     bucket_bytes: int = 65536
     queue_limit_bytes: int = 1_000_000
     topics: list[str] = dc.field(default_factory=list)
+    schedule: list[RateStep] = dc.field(default_factory=list)
 
     def validate(self) -> None:
+        for k, step in enumerate(self.schedule):
+            check_range(f"schedule[{k}].start_s", step.start_s, 0.0, 1.0e9, unit=" s")
+            check_range(f"schedule[{k}].bandwidth_bps", step.bandwidth_bps, 0.0, 1.0e10,
+                        lo_open=True, unit=" bit/s (use outages for no link)")  # fmt: skip
+            if k and step.start_s <= self.schedule[k - 1].start_s:
+                raise ConfigError(
+                    f"schedule[{k}].start_s = {step.start_s:g} s must be after "
+                    f"schedule[{k - 1}].start_s = {self.schedule[k - 1].start_s:g} s"
+                )
         if not isinstance(self.name, str) or not self.name.strip():
             raise ConfigError(f"name = {self.name!r} must be a non-empty string")
         check_range("bandwidth_bps", self.bandwidth_bps, 0.0, 1.0e10, lo_open=True,
@@ -318,16 +342,15 @@ def accept(
             ledger = ledger.append(_record(m, size, math.nan, direction, ch.name, reason))
             continue
         # Token bucket, FIFO: the departure is fixed now.
-        rate = ch.bandwidth_bps / 8.0
         t_ready = max(t_arrive, cs.t_last)
         if cs.t_last == -math.inf:  # the bucket starts full
             tokens = float(ch.bucket_bytes)
         else:
-            tokens = min(float(ch.bucket_bytes), cs.tokens + rate * (t_ready - cs.t_last))
+            tokens = min(float(ch.bucket_bytes), cs.tokens + accrued_bytes(ch, cs.t_last, t_ready))
         if tokens >= size:
             t_dep, left = t_ready, tokens - size
         else:
-            t_dep, left = t_ready + (size - tokens) / rate, 0.0
+            t_dep, left = time_to_accrue(ch, t_ready, size - tokens), 0.0
         # Random loss (burst model) and jitter: keyed per message, same seed same draws.
         u_state, u_loss = _uniforms(seed, f"link/{direction}/{ch.name}/loss", cs.count, 2)
         bad = cs.bad
@@ -368,6 +391,43 @@ def accept(
         state, in_flight=state.in_flight + tuple(new), last_seq=last, channels=chans,
         ledger=ledger,
     )  # fmt: skip
+
+
+def _segments(ch: ChannelConfig) -> list:
+    """[(start_s, bytes per second), ...] of a channel's rate, the first from -inf."""
+    return [(-math.inf, ch.bandwidth_bps / 8.0)] + [
+        (float(r.start_s), r.bandwidth_bps / 8.0) for r in ch.schedule
+    ]
+
+
+def accrued_bytes(ch: ChannelConfig, t0: float, t1: float) -> float:
+    """Tokens (bytes) a channel's rate adds over ``[t0, t1]`` (its schedule's integral)."""
+    if t1 <= t0:
+        return 0.0
+    seg = _segments(ch)
+    total = 0.0
+    for k, (start, rate) in enumerate(seg):
+        end = seg[k + 1][0] if k + 1 < len(seg) else math.inf
+        lo, hi = max(t0, start), min(t1, end)
+        if hi > lo:
+            total += rate * (hi - lo)
+    return total
+
+
+def time_to_accrue(ch: ChannelConfig, t0: float, amount: float) -> float:
+    """The first time ``t >= t0`` by which the channel's rate has added ``amount``
+    bytes since ``t0``."""
+    seg = _segments(ch)
+    need = float(amount)
+    for k, (start, rate) in enumerate(seg):
+        end = seg[k + 1][0] if k + 1 < len(seg) else math.inf
+        lo = max(t0, start)
+        if end <= lo:
+            continue
+        if rate * (end - lo) >= need:
+            return lo + need / rate
+        need -= rate * (end - lo)
+    return math.inf  # not reached: the last segment is open-ended with rate > 0
 
 
 def _due(t_received_s: float, now_s: float) -> bool:
@@ -459,9 +519,12 @@ __all__ = [
     "LinkState",
     "Message",
     "OutageWindow",
+    "RateStep",
     "accept",
+    "accrued_bytes",
     "deliver",
     "inbox",
     "records",
     "statistics",
+    "time_to_accrue",
 ]

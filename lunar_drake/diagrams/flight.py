@@ -3,12 +3,15 @@
 Wiring only. Ports (``<subsystem>.<signal>``):
 
 * inputs -- sensors ``rover.imu``, ``rover.star_tracker``, ``rover.wheel_encoders`` and
-  the uplink inbox ``uplink.commands``;
+  the uplink inbox ``uplink.commands`` and, when it sends frames down, the camera's
+  ``camera.frame_index``, ``camera.left.raw``, ``camera.right.raw``;
 * outputs -- actuator commands ``rover.wheel_speed_command``,
   ``rover.steer_angle_command`` (explicit steer), ``rover.gimbal_command``,
-  ``rover.brake_command``; the downlink outbox ``downlink.telemetry``; and the on-board
+  ``rover.brake_command``; the downlink outboxes ``downlink.telemetry`` (and
+  ``downlink.images``: compressed stereo frames); and the on-board
   records ``flight.twist_command``, ``flight.brake_command``, ``flight.pose_estimate``,
-  ``flight.pose_covariance``, ``flight.status`` (for logging).
+  ``flight.pose_covariance``, ``flight.status`` (mode, command seq, safe reason, mode
+  changes) and ``flight.bumper`` (the virtual bumper's trip) for logging.
 """
 
 from __future__ import annotations
@@ -20,20 +23,43 @@ from pydrake.systems.framework import DiagramBuilder
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
+from lunar_drake.systems.image_downlink import ImagePacketizer
 from lunar_drake.systems.rover_kinematics import RoverKinematics
 from lunar_drake.systems.state_estimator import StateEstimator
 from lunar_drake.systems.telemetry import TelemetryPacketizer
+from lunar_drake.systems.virtual_bumper import VirtualBumper
 
 #: Inputs the flight software reads: plant sensors and the uplink.
 FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "uplink.commands")
+#: Camera sensor inputs, when it sends frames down (:func:`sends_images`).
+IMAGE_INPUTS = ("camera.frame_index", "camera.left.raw", "camera.right.raw")
+
+
+def sends_images(scenario: Scenario) -> bool:
+    """True when the flight software sends camera frames down (cameras on and
+    ``flight.images.enabled``)."""
+    return scenario.sensors.camera.enabled and scenario.flight.images.enabled
+
+
+def flight_inputs(scenario: Scenario) -> tuple:
+    """The flight diagram's inputs for ``scenario``."""
+    return FLIGHT_INPUTS + (IMAGE_INPUTS if sends_images(scenario) else ())
+
+
+def image_timing(scenario: Scenario) -> tuple[float, float]:
+    """(period, offset) s of the image packetizer: just after each frame is delivered."""
+    cam = scenario.sensors.camera
+    period = 1.0 / cam.rate_hz
+    return period, (cam.delay_s % period) + 1e-6
 
 
 def MakeFlightDiagram(*, scenario: Scenario):
     """Builds the flight-software diagram (named ``flight``): the command executor (runs
-    the uplinked drive commands, brakes when parked), the rover kinematics, the on-board
-    EKF (wheel odometry, IMU gyro and accelerometer, star tracker: pose with
-    covariance), gimbal pointing
-    (from the estimate and commands, never truth) and the telemetry packetizer.
+    the uplinked commands, keeps the mode, safes on a bumper trip or the loss of the
+    uplink, brakes when parked), the virtual bumper (tilt, stall, yaw slip), the rover
+    kinematics, the on-board EKF (wheel odometry, IMU gyro and accelerometer, star
+    tracker: pose with covariance), gimbal pointing (from the estimate and the
+    operator's mast commands, never truth) and the telemetry packetizer.
 
     It knows the rover only from ``scenario.rover.description`` and the start point
     from ``scenario.rover.spawn_*`` (what operations tell the rover).
@@ -42,8 +68,14 @@ def MakeFlightDiagram(*, scenario: Scenario):
     d = scenario.rover.description
     builder = DiagramBuilder()
     executor = builder.AddNamedSystem(
-        "flight.executor", CommandExecutor(rate_hz=f.rate_hz, brake_delay_s=f.brake_delay_s)
+        "flight.executor",
+        CommandExecutor(
+            rate_hz=f.rate_hz,
+            brake_delay_s=f.brake_delay_s,
+            uplink_timeout_s=f.safety.uplink_timeout_s,
+        ),
     )
+    bumper = builder.AddNamedSystem("flight.bumper", VirtualBumper(description=d, config=f.safety))
     kinematics = builder.AddNamedSystem(
         "flight.kinematics", RoverKinematics(description=d, rate_hz=f.rate_hz)
     )
@@ -65,9 +97,16 @@ def MakeFlightDiagram(*, scenario: Scenario):
     builder.ExportInput(executor.commands_input, "uplink.commands")
     builder.Connect(executor.twist_output, kinematics.twist_input)
     builder.ExportInput(odometry.wheel_angles_input, "rover.wheel_encoders")
+    builder.ConnectInput("rover.wheel_encoders", bumper.wheel_angles_input)
+    builder.Connect(kinematics.wheel_speed_output, bumper.wheel_speed_input)
+    builder.Connect(odometry.pose_estimate_output, bumper.pose_input)
+    builder.Connect(executor.status_output, bumper.status_input)
+    builder.Connect(bumper.trip_output, executor.trip_input)
+    builder.Connect(executor.mast_output, gimbal.hold_input)
     builder.ExportInput(odometry.q_WB_input, "rover.star_tracker")
     if kinematics.steer_angle_output is not None:
         builder.Connect(kinematics.steer_angle_output, odometry.steer_input)
+        builder.Connect(kinematics.steer_angle_output, bumper.steer_input)
         builder.ExportOutput(kinematics.steer_angle_output, "rover.steer_angle_command")
     builder.Connect(odometry.p_WB_output, gimbal.p_WB_input)
     builder.Connect(odometry.q_WB_output, gimbal.q_WB_input)
@@ -77,15 +116,26 @@ def MakeFlightDiagram(*, scenario: Scenario):
     builder.Connect(executor.brake_output, telemetry.brake_input)
     builder.Connect(executor.status_output, telemetry.status_input)
     builder.ExportInput(odometry.imu_input, "rover.imu")
+    builder.ConnectInput("rover.imu", bumper.imu_input)
     builder.ExportOutput(kinematics.wheel_speed_output, "rover.wheel_speed_command")
     builder.ExportOutput(gimbal.gimbal_command_output, "rover.gimbal_command")
     builder.ExportOutput(executor.brake_output, "rover.brake_command")
     builder.ExportOutput(telemetry.telemetry_output, "downlink.telemetry")
+    if sends_images(scenario):
+        period, offset = image_timing(scenario)
+        images = builder.AddNamedSystem(
+            "flight.images", ImagePacketizer(config=f.images, period_s=period, offset_s=offset)
+        )
+        builder.ExportInput(images.frame_index_input, "camera.frame_index")
+        builder.ExportInput(images.left_input, "camera.left.raw")
+        builder.ExportInput(images.right_input, "camera.right.raw")
+        builder.ExportOutput(images.images_output, "downlink.images")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")
     builder.ExportOutput(odometry.pose_estimate_output, "flight.pose_estimate")
     builder.ExportOutput(odometry.pose_covariance_output, "flight.pose_covariance")
     builder.ExportOutput(executor.brake_output, "flight.brake_command")
     builder.ExportOutput(executor.status_output, "flight.status")
+    builder.ExportOutput(bumper.trip_output, "flight.bumper")
     diagram = builder.Build()
     diagram.set_name("flight")
     return diagram

@@ -4,20 +4,27 @@ delivered.
 Wiring only. Ports: input ``downlink.telemetry`` (the downlink inbox); outputs
 ``uplink.commands`` (the uplink outbox) and, for displays and logging,
 ``ground.telemetry`` (the newest telemetry packet received,
-:data:`~lunar_drake.autonomy.telemetry.TELEMETRY_FIELDS`) and
-``ground.telemetry_t_received`` (s).
+:data:`~lunar_drake.autonomy.telemetry.TELEMETRY_FIELDS`),
+``ground.telemetry_t_received`` (s) and ``ground.pose_estimate`` (the ground's estimate
+of the rover's pose from telemetry, x, y, z, roll, pitch, yaw).
 """
 
 from __future__ import annotations
 
+import math
+
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.autonomy.commands import DriveCommand, GotoCommand
+from lunar_drake.autonomy.operations import OperatorParams, Request
+from lunar_drake.autonomy.planner import PlanningError
+from lunar_drake.diagrams.flight import sends_images
 from lunar_drake.scenario import Scenario
-from lunar_drake.systems.command_sequencer import CommandSequencer
+from lunar_drake.systems.ground_operator import GroundOperator, plan_waypoints
+from lunar_drake.systems.image_downlink import ImageReceiver
 from lunar_drake.systems.telemetry import TelemetryReceiver
 
-#: The only input of the ground software.
+#: The inputs of the ground software (``downlink.images`` too when frames come down).
 GROUND_INPUTS = ("downlink.telemetry",)
 
 
@@ -29,28 +36,21 @@ def route_commands(scenario: Scenario) -> list[DriveCommand]:
     ]
 
 
-def goal_commands(scenario: Scenario, site) -> list[GotoCommand]:
+def goal_commands(scenario: Scenario, site, *, costmap=None) -> list[GotoCommand]:
     """Plans from the spawn point through ``ground.goals`` in order on the ground's
-    a-priori map (``ground.map``, ``ground.hazards``; :mod:`lunar_drake.autonomy.planner`)
-    and returns one goto command per goal. Raises OutOfBoundsError / PlanningError for a
-    goal off the map, inside a hazard or unreachable."""
-    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
-    from lunar_drake.autonomy.planner import PlanningError, plan_path
+    a-priori map (``costmap``, default :func:`ground_costmap`;
+    :mod:`lunar_drake.autonomy.planner`) and returns one goto command per goal (what the
+    ground sends when the estimate is perfect). Raises OutOfBoundsError / PlanningError
+    naming the goal for a goal off the map, inside a hazard or unreachable."""
+    from lunar_drake.autonomy.planner import plan_path
     from lunar_drake.errors import OutOfBoundsError
 
     g = scenario.ground
+    cm = ground_costmap(scenario, site) if costmap is None else costmap
     start = (scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)
-    goals = [(p.x_m, p.y_m) for p in g.goals]
-    cm = costmap_for_site(
-        heightfield=site.heightfield,
-        points_xy=[start, *goals],
-        rover=RoverEnvelope.of(scenario.rover.description),
-        hazards=g.hazards,
-        map_config=g.map,
-        seed=scenario.random_seed,
-    )
     out = []
-    for k, goal in enumerate(goals):
+    for k, p in enumerate(g.goals):
+        goal = (p.x_m, p.y_m)
         try:
             path = plan_path(costmap=cm, start_xy=start, goal_xy=goal)
         except (PlanningError, OutOfBoundsError) as exc:
@@ -68,28 +68,124 @@ def goal_commands(scenario: Scenario, site) -> list[GotoCommand]:
     return out
 
 
+def ground_costmap(scenario: Scenario, site):
+    """The ground's costmap (``ground.map``, ``ground.hazards``): over the whole site
+    when it has at most 4096^2 pixels, else around the spawn point, the goals and the
+    scheduled goal actions plus ``ground.map.margin_m``."""
+    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
+
+    g = scenario.ground
+    hf = site.heightfield
+    if hf.shape[0] * hf.shape[1] <= 4096**2:
+        b = hf.bounds
+        points = [(b.left, b.bottom), (b.right, b.top)]
+    else:
+        points = [(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)]
+        points += [(p.x_m, p.y_m) for p in g.goals]
+        points += [(a.x_m, a.y_m) for a in g.actions if a.action == "goal"]
+    return costmap_for_site(
+        heightfield=hf,
+        points_xy=points,
+        rover=RoverEnvelope.of(scenario.rover.description),
+        hazards=g.hazards,
+        map_config=g.map,
+        seed=scenario.random_seed,
+    )
+
+
+def operator_params(scenario: Scenario) -> OperatorParams:
+    """The ground's settings from ``scenario.ground``."""
+    g = scenario.ground
+    return OperatorParams(
+        drive_speed_mps=g.drive_speed_mps,
+        goto_tolerance_m=g.goto_tolerance_m,
+        goal_tolerance_m=g.goal_tolerance_m,
+        heartbeat_s=g.heartbeat_s,
+        auto_resume=g.auto_resume,
+        max_resumes=g.max_resumes,
+        max_replans=g.max_replans,
+        replan_deviation_m=g.replan_deviation_m,
+        max_extrapolation_s=g.max_extrapolation_s,
+        ack_timeout_s=g.ack_timeout_s,
+    )
+
+
+def scheduled_requests(scenario: Scenario) -> list:
+    """((t_s, Request), ...): the route (``drive``) or the goals at t = 0, then
+    ``ground.actions`` at their times."""
+    g = scenario.ground
+    out = []
+    if g.goals:
+        out += [(0.0, Request("goal", (p.x_m, p.y_m))) for p in g.goals]
+    else:
+        out += [(0.0, Request("drive", (c,))) for c in route_commands(scenario)]
+    for a in g.actions:
+        if a.action == "goal":
+            r = Request("goal", (a.x_m, a.y_m))
+        elif a.action == "drive_arc":
+            r = Request("drive_arc", (a.speed_mps, a.curvature_per_m, a.distance_m))
+        elif a.action == "point_mast":
+            args = () if a.auto else (math.radians(a.pan_deg), math.radians(a.tilt_deg))
+            r = Request("point_mast", args)
+        else:
+            r = Request(a.action)
+        out.append((a.t_s, r))
+    return out
+
+
 def MakeGroundDiagram(*, scenario: Scenario, site=None):
-    """Builds the ground-software diagram (named ``ground``): the operator command source
-    (the route, or with ``ground.goals`` the planned gotos, as a command sequence, one
-    command per ground tick) and the telemetry receiver (every packet the downlink
-    delivered, once, in order). ``site`` (its DEM is the ground's a-priori map) is needed
-    only with goals."""
+    """Builds the ground-software diagram (named ``ground``): the operator
+    (:class:`~lunar_drake.systems.ground_operator.GroundOperator`: the route, or the
+    goals driven one at a time with planning and replanning on the ground's map from
+    the downlinked estimate, the scheduled ``ground.actions``, Python requests,
+    heartbeats, the ground pose estimate) and the telemetry receiver (every packet the
+    downlink delivered, once, in order). ``site`` (its DEM is the ground's a-priori
+    map) is needed for goals; scenario goals the map cannot serve (off it, in a hazard,
+    unreachable from the previous one) are refused here, before the run."""
     g = scenario.ground
     builder = DiagramBuilder()
+    planner, in_map = None, None
+    if site is not None:
+        costmap = ground_costmap(scenario, site)
+        planner = plan_waypoints(costmap)
+
+        def in_map(x, y):
+            return costmap.inside(*costmap.cell_of(x, y))
+
+    elif g.goals or any(a.action == "goal" for a in g.actions):
+        raise ValueError("ground.goals need the site (the ground's a-priori map)")
     if g.goals:
-        if site is None:
-            raise ValueError("ground.goals need the site (the ground's a-priori map)")
-        commands = goal_commands(scenario, site)
-    else:
-        commands = route_commands(scenario)
+        goal_commands(scenario, site, costmap=costmap)  # refuse what the map cannot serve
+
+    def no_map(start_xy, goal_xy):
+        raise PlanningError("the ground has no map (MakeGroundDiagram without a site)")
+
     operator = builder.AddNamedSystem(
-        "ground.operator", CommandSequencer(commands=commands, rate_hz=g.rate_hz)
+        "ground.operator",
+        GroundOperator(
+            params=operator_params(scenario),
+            rate_hz=g.rate_hz,
+            planner=planner or no_map,
+            start_pose=(
+                scenario.rover.spawn_x_m,
+                scenario.rover.spawn_y_m,
+                math.radians(scenario.rover.spawn_yaw_deg),
+            ),
+            actions=scheduled_requests(scenario),
+            in_map=in_map,
+        ),
     )
     receiver = builder.AddNamedSystem("ground.telemetry", TelemetryReceiver(rate_hz=g.rate_hz))
     builder.ExportInput(receiver.telemetry_input, "downlink.telemetry")
+    builder.ConnectInput("downlink.telemetry", operator.telemetry_input)
     builder.ExportOutput(operator.commands_output, "uplink.commands")
     builder.ExportOutput(receiver.telemetry_output, "ground.telemetry")
     builder.ExportOutput(receiver.t_received_output, "ground.telemetry_t_received")
+    builder.ExportOutput(operator.pose_estimate_output, "ground.pose_estimate")
+    if sends_images(scenario):
+        images = builder.AddNamedSystem("ground.images", ImageReceiver(rate_hz=g.rate_hz))
+        builder.ExportInput(images.images_input, "downlink.images")
+        builder.ExportOutput(images.frames_received_output, "ground.frames_received")
     diagram = builder.Build()
     diagram.set_name("ground")
     return diagram

@@ -19,7 +19,7 @@ from __future__ import annotations
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.comms.light_time import light_time_s
-from lunar_drake.diagrams.flight import MakeFlightDiagram
+from lunar_drake.diagrams.flight import MakeFlightDiagram, image_timing, sends_images
 from lunar_drake.diagrams.ground import MakeGroundDiagram
 from lunar_drake.diagrams.plant import MakePlantDiagram
 from lunar_drake.ephemeris.sun_earth import SiteLocation
@@ -58,7 +58,10 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
         "downlink",
         Link(
             direction="downlink",
-            topics={"telemetry": 1.0 / scenario.flight.telemetry_rate_hz},
+            topics={
+                "telemetry": 1.0 / scenario.flight.telemetry_rate_hz,
+                **({"images": image_timing(scenario)} if sends_images(scenario) else {}),
+            },
             config=scenario.comms.downlink,
             seed=scenario.random_seed,
             light_time_s=light,
@@ -77,6 +80,9 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     builder.Connect(uplink.outputs["commands"], flight.GetInputPort("uplink.commands"))
     builder.Connect(flight.GetOutputPort("downlink.telemetry"), downlink.inputs["telemetry"])
     builder.Connect(downlink.outputs["telemetry"], ground.GetInputPort("downlink.telemetry"))
+    if sends_images(scenario):
+        builder.Connect(flight.GetOutputPort("downlink.images"), downlink.inputs["images"])
+        builder.Connect(downlink.outputs["images"], ground.GetInputPort("downlink.images"))
     if plant.HasOutputPort("radio.earth_visible"):  # loss of signal behind terrain
         for link in (uplink, downlink):
             builder.Connect(plant.GetOutputPort("radio.earth_visible"), link.earth_visible_input)
@@ -95,3 +101,17 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     diagram = builder.Build()
     diagram.set_name("mission")
     return diagram
+
+
+def ground_operator(mission):
+    """The mission's :class:`~lunar_drake.systems.ground_operator.GroundOperator`: the
+    operator API (``send_goal``, ``stop``, ``resume``, ``drive_arc``, ``point_mast``;
+    each takes the simulator's root context) between ``AdvanceTo`` calls::
+
+        simulator = Simulator(mission)
+        ops = ground_operator(mission)
+        simulator.AdvanceTo(5.0)
+        ops.send_goal(simulator.get_mutable_context(), x_m=9.0, y_m=0.0)
+        simulator.AdvanceTo(120.0)
+    """
+    return mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")

@@ -58,6 +58,7 @@ class GimbalPointing(LeafSystem):
         - q_WB_estimate (optional)
         - p_WB_estimate (optional)
         - target_W (optional)
+        - hold (optional)
         output_ports:
         - gimbal_command
 
@@ -67,6 +68,8 @@ class GimbalPointing(LeafSystem):
     that look at it from the estimated pose (``p_WB_estimate`` (3,), ``q_WB_estimate``
     (4,) = (w, x, y, z)). Commands (pan, tilt in rad) are clipped to the joint limits and
     updated at ``config.rate_hz``; G is the chassis frame translated to the pan axis.
+    ``hold`` (3,) = (held, pan, tilt) overrides both while held is 1 (the operator's
+    mast command, through the executor).
 
     Args:
         description: the RoverDescription (mast geometry, joint limits).
@@ -85,6 +88,7 @@ class GimbalPointing(LeafSystem):
         self.q_WB_input = self.DeclareVectorInputPort("q_WB_estimate", 4)
         self.p_WB_input = self.DeclareVectorInputPort("p_WB_estimate", 3)
         self.target_input = self.DeclareVectorInputPort("target_W", 3)
+        self.hold_input = self.DeclareVectorInputPort("hold", 3)
         self._cmd = self.DeclareDiscreteState(BasicVector(self._clip(*self._lookahead())))
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / config.rate_hz, 0.0, self._update)
         self.gimbal_command_output = self.DeclareStateOutputPort("gimbal_command", self._cmd)
@@ -100,7 +104,10 @@ class GimbalPointing(LeafSystem):
         ]
 
     def _update(self, context, discrete_state):
-        if self.target_input.HasValue(context):
+        hold = self.hold_input.Eval(context) if self.hold_input.HasValue(context) else None
+        if hold is not None and hold[0] > 0.5:
+            pan, tilt = float(hold[1]), float(hold[2])
+        elif self.target_input.HasValue(context):
             R_WC = rotation_matrix_from_quaternion(self.q_WB_input.Eval(context))
             p_WC = np.asarray(self.p_WB_input.Eval(context))
             p_WT = np.asarray(self.target_input.Eval(context))

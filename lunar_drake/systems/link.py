@@ -44,7 +44,8 @@ class Link(LeafSystem):
 
     Args:
         direction: ``uplink`` or ``downlink`` (a label in the records).
-        topics: topic name -> period (s) of its producer's updates.
+        topics: topic name -> period (s) of its producer's updates, or (period, offset)
+            for a producer whose updates start at ``offset`` (s).
         config: :class:`~lunar_drake.comms.link.LinkConfig`.
         history: deliveries kept per topic in the inbox.
         seed: the scenario's random seed (jitter and loss draws).
@@ -69,16 +70,21 @@ class Link(LeafSystem):
         self._direction = direction
         self._config = config
         self._history = int(history)
-        self._topics = dict(topics)
+        self._topics = {
+            t: (float(v[0]), float(v[1])) if isinstance(v, tuple) else (float(v), 0.0)
+            for t, v in topics.items()
+        }
         self._state = self.DeclareAbstractState(AbstractValue.Make(core.LinkState()))
         self.inputs = {}
         self.outputs = {}
         for topic in self._topics:
             self.inputs[topic] = self.DeclareAbstractInputPort(topic, AbstractValue.Make(()))
         self.earth_visible_input = self.DeclareVectorInputPort("earth_visible", 1)
-        for period in sorted(set(self._topics.values())):
+        for period, offset in sorted(set(self._topics.values())):
             self.DeclarePeriodicUnrestrictedUpdateEvent(
-                period, POLL_OFFSET_S, lambda c, s, p=period: self._poll(c, s, p)
+                period,
+                offset + POLL_OFFSET_S,
+                lambda c, s, p=(period, offset): self._poll(c, s, p),
             )
         for topic in self._topics:
             self.outputs[topic] = self.DeclareAbstractOutputPort(

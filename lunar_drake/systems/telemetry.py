@@ -38,20 +38,18 @@ class TelemetryPacketizer(LeafSystem):
         self.pose_estimate_input = self.DeclareVectorInputPort("pose_estimate", 6)
         self.twist_input = self.DeclareVectorInputPort("twist_command", 3)
         self.brake_input = self.DeclareVectorInputPort("brake_command", 1)
-        self.status_input = self.DeclareVectorInputPort("status", 2)
+        self.status_input = self.DeclareVectorInputPort("status", 5)
         self._outbox = self.DeclareAbstractState(AbstractValue.Make(()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / self._rate, 0.0, self._update)
         self.telemetry_output = self.DeclareStateOutputPort("telemetry", self._outbox)
 
     def _update(self, context, state):
         t = context.get_time()
-        status = self.status_input.Eval(context)
         payload = pack_telemetry(
             pose_estimate=self.pose_estimate_input.Eval(context),
             twist_command=self.twist_input.Eval(context),
             brake=self.brake_input.Eval(context)[0],
-            mode=status[0],
-            command_seq=status[1],
+            status=self.status_input.Eval(context),
         )
         payload.setflags(write=False)
         msg = Message(

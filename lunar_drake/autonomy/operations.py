@@ -1,0 +1,387 @@
+"""Ground operations: goals, replanning, operator requests and the ground's pose
+estimate, all from what the downlink delivered. Pure; no Drake.
+
+Each ground tick :func:`operator_step` takes the newest telemetry the downlink delivered
+and the operator's requests (the scenario's ``ground.goals`` and ``ground.actions``,
+or Python calls: :class:`~lunar_drake.systems.ground_operator.GroundOperator`) and
+returns the commands to send up:
+
+* **goals** are driven one at a time: the ground plans from its pose estimate to the
+  goal on its costmap and sends a goto; when telemetry says the rover finished it (the
+  goto acknowledged, the mode ``waiting``), the goal is *reached on the ground* if the
+  downlinked estimate is within ``goal_tolerance_m``, else the ground replans from the
+  estimate (at most ``max_replans`` times, then the goal is ``failed``). While the
+  rover drives, an estimate more than ``replan_deviation_m`` off the planned path
+  makes the ground stop it and replan. A goal added while driving waits its turn.
+* **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
+  ``max_resumes`` times) sends a resume and a goto replanned from the estimate, in one
+  uplink pass (the executor handles them in order).
+* **requests**: ``stop`` (stop, and pause goal driving), ``resume`` (resume, and
+  continue the goals from the estimate), ``drive_arc`` (speed, curvature, distance),
+  ``point_mast`` (pan, tilt; or automatic), ``goal`` (x, y), ``drive`` (a route
+  segment).
+* a **heartbeat** goes up whenever nothing else was sent for ``heartbeat_s``.
+
+The ground's pose estimate is the newest downlinked estimate carried forward to now
+with the twist command in the same packet (exact arc), for at most
+``max_extrapolation_s``: telemetry is a light time old when it lands.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+
+from lunar_drake.autonomy.commands import (
+    MODES,
+    SAFE_REASONS,
+    DriveCommand,
+    GotoCommand,
+    Heartbeat,
+    MastCommand,
+    ResumeCommand,
+    StopCommand,
+)
+from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
+from lunar_drake.comms.messages import Ledger, Message, payload_size_bytes
+from lunar_drake.errors import LunarDrakeError
+
+TOPIC = "commands"
+#: Operator request kinds.
+REQUESTS = ("goal", "stop", "resume", "drive_arc", "point_mast", "drive")
+#: What becomes of a goal (on the ground's own judgement, from telemetry).
+GOAL_STATUS = ("pending", "active", "reached", "failed")
+
+_F = {name: k for k, name in enumerate(TELEMETRY_FIELDS)}
+
+
+@dc.dataclass(frozen=True)
+class Request:
+    """An operator request: ``kind`` (one of :data:`REQUESTS`) and its arguments
+    (goal: x_m, y_m; drive_arc: speed_mps, curvature_per_m, distance_m; point_mast:
+    pan_rad, tilt_rad, or none for automatic pointing; drive: a DriveCommand)."""
+
+    kind: str
+    args: tuple = ()
+
+
+@dc.dataclass(frozen=True)
+class Event:
+    """Something the ground did or saw: at ``t_s`` (s), ``kind`` and a ``detail``."""
+
+    t_s: float
+    kind: str
+    detail: str = ""
+
+
+@dc.dataclass(frozen=True)
+class OperatorParams:
+    """The ground's settings (from the scenario's ``ground`` section).
+
+    Attributes: drive_speed_mps, goto_tolerance_m (on board), goal_tolerance_m (the
+    ground's judgement on the downlinked estimate), heartbeat_s, auto_resume,
+    max_resumes, max_replans, replan_deviation_m, max_extrapolation_s, ack_timeout_s:
+    see
+    :class:`~lunar_drake.scenario.GroundConfig`.
+    """
+
+    drive_speed_mps: float = 0.2
+    goto_tolerance_m: float = 0.2
+    goal_tolerance_m: float = 1.0
+    heartbeat_s: float = 5.0
+    auto_resume: bool = True
+    max_resumes: int = 3
+    max_replans: int = 3
+    replan_deviation_m: float = 2.0
+    max_extrapolation_s: float = 10.0
+    ack_timeout_s: float = 20.0
+
+
+@dc.dataclass(frozen=True)
+class OperatorState:
+    """What the ground holds between ticks (immutable).
+
+    Attributes:
+        pending: requests not yet handled. next_seq: the next command seq.
+        goals: ((x, y), ...) every goal so far; status: their :data:`GOAL_STATUS`.
+        active: index of the goal being driven (-1: none). paused: goal driving
+            stopped by the operator. goto_seq: seq of the goto in flight (-1: none, plan
+            one). goto_sent_s: when it went up. path: its waypoints. replans: replans
+            of the active goal.
+        resumes: automatic resumes so far. safe_seen: the telemetry ``mode_changes``
+            of the newest safing handled.
+        tel_seq, packet, t_sent, t_received: the newest telemetry handled (-1 / None).
+        last_sent_s: when a command last went up (s). outbox: this tick's messages.
+        events: a Ledger of :class:`Event`.
+    """
+
+    pending: tuple = ()
+    next_seq: int = 0
+    goals: tuple = ()
+    status: tuple = ()
+    active: int = -1
+    paused: bool = False
+    goto_seq: int = -1
+    goto_sent_s: float = -math.inf
+    path: tuple = ()
+    replans: int = 0
+    resumes: int = 0
+    safe_seen: int = -1
+    tel_seq: int = -1
+    packet: np.ndarray | None = None
+    t_sent: float = math.nan
+    t_received: float = math.nan
+    last_sent_s: float = -math.inf
+    outbox: tuple = ()
+    events: Ledger = dc.field(default_factory=Ledger)
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+def ground_pose(packet, t_sent: float, now: float, *, max_extrapolation_s: float) -> np.ndarray:
+    """The downlinked pose estimate (x, y, z, roll, pitch, yaw) carried from ``t_sent``
+    to ``now`` (s) along the packet's commanded twist (vx, vy in the chassis frame, wz;
+    an exact arc), for at most ``max_extrapolation_s``; unchanged while braked."""
+    p = np.asarray(packet, np.float64)
+    pose = p[:6].copy()
+    dt = min(max(now - t_sent, 0.0), max_extrapolation_s)
+    if p[_F["brake"]] > 0.5 or dt <= 0.0:
+        return pose
+    vx, vy, wz = p[_F["vx_cmd_mps"]], p[_F["vy_cmd_mps"]], p[_F["wz_cmd_radps"]]
+    yaw = pose[5]
+    dyaw = wz * dt
+    if abs(dyaw) < 1e-9:
+        fx, fy = vx * dt, vy * dt
+    else:  # the body displacement of a constant twist, integrated exactly
+        s, c = math.sin(dyaw), 1.0 - math.cos(dyaw)
+        fx = (vx * s - vy * c) / wz
+        fy = (vx * c + vy * s) / wz
+    pose[0] += fx * math.cos(yaw) - fy * math.sin(yaw)
+    pose[1] += fx * math.sin(yaw) + fy * math.cos(yaw)
+    pose[5] = (yaw + dyaw + math.pi) % (2.0 * math.pi) - math.pi
+    return pose
+
+
+def distance_to_path(xy, path) -> float:
+    """Horizontal distance (m) from ``xy`` to the polyline ``path`` ((x, y), ...)."""
+    p = np.asarray(xy, np.float64)[:2]
+    w = np.asarray(path, np.float64).reshape(-1, 2)
+    if len(w) == 1:
+        return float(np.hypot(*(p - w[0])))
+    a, b = w[:-1], w[1:]
+    d = b - a
+    L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
+    t = np.clip(np.sum((p - a) * d, axis=1) / L2, 0.0, 1.0)
+    q = a + t[:, None] * d
+    return float(np.min(np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])))
+
+
+def _set(tup: tuple, k: int, v) -> tuple:
+    return (*tup[:k], v, *tup[k + 1 :])
+
+
+def operator_step(state: OperatorState, deliveries, *, now: float, params: OperatorParams,
+                  planner, start_pose, requests=()) -> OperatorState:  # fmt: skip
+    """One ground tick at ``now`` (s).
+
+    ``deliveries``: the downlink telemetry inbox (newest handled once); ``requests``:
+    new :class:`Request` s (appended to the pending ones); ``planner(start_xy,
+    goal_xy)`` returns waypoints ((x, y), ...) or raises a LunarDrakeError (a goal it
+    cannot serve fails); ``start_pose`` (x, y, yaw) is the spawn pose, the estimate
+    before the first telemetry. The returned state's ``outbox`` holds the messages to
+    send now.
+    """
+    s = state
+    pending = s.pending + tuple(requests)
+    events = s.events
+    # The newest telemetry.
+    tel_seq, packet, t_sent, t_recv = s.tel_seq, s.packet, s.t_sent, s.t_received
+    for d in deliveries:
+        if d.message.seq > tel_seq:
+            tel_seq, packet = d.message.seq, d.message.payload
+            t_sent, t_recv = d.message.t_sent_s, d.t_received_s
+    if packet is None:
+        pose = np.array([start_pose[0], start_pose[1], 0.0, 0.0, 0.0, start_pose[2]])
+    else:
+        pose = ground_pose(packet, t_sent, now, max_extrapolation_s=params.max_extrapolation_s)
+    goals, status, active, paused = s.goals, s.status, s.active, s.paused
+    goto_seq, path, replans, resumes = s.goto_seq, s.path, s.replans, s.resumes
+    goto_sent = s.goto_sent_s
+    seq = s.next_seq
+    out = []
+
+    def send(cmd):
+        nonlocal seq
+        out.append(Message(topic=TOPIC, seq=seq, t_sent_s=now, payload=cmd,
+                           size_bytes=payload_size_bytes(cmd)))  # fmt: skip
+        seq += 1
+        return seq - 1
+
+    def note(kind, detail=""):
+        nonlocal events
+        events = events.append(Event(t_s=now, kind=kind, detail=detail))
+
+    for r in pending:
+        if r.kind == "goal":
+            goals += ((float(r.args[0]), float(r.args[1])),)
+            status += ("pending",)
+            note("goal", f"{len(goals) - 1}: ({r.args[0]:.2f}, {r.args[1]:.2f}) m")
+        elif r.kind == "stop":
+            send(StopCommand())
+            paused, goto_seq = True, -1
+            note("stop")
+        elif r.kind == "resume":
+            send(ResumeCommand())
+            paused, goto_seq = False, -1
+            note("resume")
+        elif r.kind == "drive_arc":
+            v, k, dist = (float(a) for a in r.args)
+            send(DriveCommand(duration_s=abs(dist / v), vx_mps=v, wz_radps=v * k))
+            note("drive_arc", f"{v:g} m/s, {k:g} 1/m, {dist:g} m")
+        elif r.kind == "drive":
+            send(r.args[0])
+        elif r.kind == "point_mast":
+            cmd = MastCommand(auto=True) if not r.args else MastCommand(*map(float, r.args))
+            send(cmd)
+            note("point_mast", "auto" if cmd.auto else f"{cmd.pan_rad:.3f}, {cmd.tilt_rad:.3f} rad")
+        else:
+            raise ValueError(f"request kind {r.kind!r}; must be one of {REQUESTS}")
+    mode = MODES[int(packet[_F["mode"]])] if packet is not None else "idle"
+    # The goto in flight is acknowledged once the rover accepted it (or a later motion
+    # command): a newer heartbeat alone does not prove it arrived.
+    acked = packet is not None and packet[_F["motion_seq"]] >= goto_seq >= 0
+
+    def plan_goto(why):
+        nonlocal goto_seq, goto_sent, path, active, status
+        goal = goals[active]
+        try:
+            wp = planner((pose[0], pose[1]), goal)
+        except LunarDrakeError as exc:
+            status = _set(status, active, "failed")
+            note("goal_failed", f"{active}: {exc}")
+            active, goto_seq, path = -1, -1, ()
+            return
+        length = float(np.sum(np.hypot(*np.diff(np.asarray(wp), axis=0).T))) if len(wp) > 1 else 0
+        cmd = GotoCommand(
+            waypoints=tuple((float(x), float(y)) for x, y in wp),
+            speed_mps=params.drive_speed_mps,
+            tolerance_m=params.goto_tolerance_m,
+            timeout_s=3.0 * length / params.drive_speed_mps + 60.0,
+        )
+        goto_seq, goto_sent, path = send(cmd), now, cmd.waypoints
+        note("plan", f"{why}: goal {active}, {len(wp)} waypoints, {length:.1f} m")
+
+    # A new safing: resume (and replan below).
+    if packet is not None and mode == "safed":
+        changes = int(packet[_F["mode_changes"]])
+        if changes != s.safe_seen:
+            reason = SAFE_REASONS[int(packet[_F["safe_reason"]])]
+            note("safed", reason)
+            s_seen = changes
+            if params.auto_resume and resumes < params.max_resumes and not paused:
+                send(ResumeCommand())
+                resumes += 1
+                goto_seq = -1
+                note("resume", f"automatic ({resumes} of {params.max_resumes})")
+        else:
+            s_seen = s.safe_seen
+    else:
+        s_seen = s.safe_seen
+
+    def start_next():
+        # Activate pending goals in order until one gets a plan (or none is left).
+        nonlocal active, status, goto_seq, path, replans
+        active, goto_seq, path, replans = -1, -1, (), 0
+        while "pending" in status:
+            active = status.index("pending")
+            status = _set(status, active, "active")
+            plan_goto("start")
+            if active >= 0:
+                return
+
+    def give_up(detail):
+        nonlocal status
+        status = _set(status, active, "failed")
+        note("goal_failed", f"{active}: {detail}")
+        start_next()
+
+    # Goals.
+    if active < 0 and not paused and "pending" in status:
+        if mode != "safed":
+            start_next()
+    elif active >= 0 and not paused:
+        if goto_seq < 0:
+            resumed = bool(out) and isinstance(out[-1].payload, ResumeCommand)
+            if mode != "safed" or resumed:
+                plan_goto("after a resume" if resumed else "start")
+                if active < 0:
+                    start_next()
+        elif not acked and now - goto_sent > params.ack_timeout_s:
+            # Not acknowledged: lost on the way up (an outage, out of sight of Earth).
+            note("no_ack", f"goto seq {goto_seq} sent at {goto_sent:.1f} s")
+            if mode == "safed":
+                send(ResumeCommand())
+                note("resume", "with the resent goto")
+            plan_goto("resend")
+            if active < 0:
+                start_next()
+        elif acked and mode in ("waiting", "idle"):
+            err = math.hypot(pose[0] - goals[active][0], pose[1] - goals[active][1])
+            if err <= params.goal_tolerance_m:
+                status = _set(status, active, "reached")
+                note("goal_reached", f"{active}: estimate {err:.2f} m from it")
+                start_next()
+            elif replans < params.max_replans:
+                replans += 1
+                plan_goto(f"replan {replans} ({err:.2f} m short)")
+                if active < 0:
+                    start_next()
+            else:
+                give_up(f"{err:.2f} m short after {replans} replans")
+        elif acked and mode == "driving" and path and replans < params.max_replans:
+            off = distance_to_path(pose[:2], path)
+            if off > params.replan_deviation_m:
+                send(StopCommand())
+                replans += 1
+                plan_goto(f"replan {replans} ({off:.2f} m off the path)")
+                if active < 0:
+                    start_next()
+    if not out and now - s.last_sent_s >= params.heartbeat_s - 1e-9:
+        send(Heartbeat())
+    return OperatorState(
+        pending=(),
+        next_seq=seq,
+        goals=goals,
+        status=status,
+        active=active,
+        paused=paused,
+        goto_seq=goto_seq,
+        goto_sent_s=goto_sent,
+        path=path,
+        replans=replans,
+        resumes=resumes,
+        safe_seen=s_seen,
+        tel_seq=tel_seq,
+        packet=packet,
+        t_sent=t_sent,
+        t_received=t_recv,
+        last_sent_s=now if out else s.last_sent_s,
+        outbox=tuple(out),
+        events=events,
+    )
+
+
+__all__ = [
+    "GOAL_STATUS",
+    "REQUESTS",
+    "Event",
+    "OperatorParams",
+    "OperatorState",
+    "Request",
+    "distance_to_path",
+    "ground_pose",
+    "operator_step",
+]

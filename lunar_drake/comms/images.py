@@ -1,0 +1,113 @@
+"""Camera frames as downlink payloads: compressed with OpenCV, sized by their real
+bytes. Pure (numpy + OpenCV); no Drake.
+
+The flight software sends each selected stereo frame as one :class:`StereoFrame`
+message on the ``images`` topic: the raw 12-bit codes of both cameras, PNG (lossless,
+16-bit) or JPEG (lossy, the top 8 bits at ``jpeg_quality``). The link charges the
+message its encoded size, so the image channel's bandwidth and queue see what a rover
+would really send.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
+
+import dataclasses as dc
+
+import numpy as np
+
+from lunar_drake.errors import ConfigError, check_range
+
+CODECS = ("png", "jpeg")
+#: Bytes of a stereo frame's header (frame index, capture time, codec, sizes).
+HEADER_BYTES = 24
+
+
+@dc.dataclass
+class ImageDownlinkConfig:
+    """What the flight software sends down of the mast camera frames (``flight.images``).
+
+    Attributes:
+        enabled: send frames (when the cameras are enabled).
+        every_n_frames: send every n-th stereo frame (>= 1).
+        codec: ``png`` (lossless, 16-bit) or ``jpeg`` (lossy, 8-bit).
+        jpeg_quality: JPEG quality, 1-100.
+        png_compression: PNG compression level, 0-9 (the size changes, never the pixels).
+        adc_bits: bits of the raw codes (the camera's ADC); JPEG keeps the top 8.
+    """
+
+    enabled: bool = True
+    every_n_frames: int = 1
+    codec: str = "png"
+    jpeg_quality: int = 90
+    png_compression: int = 3
+    adc_bits: int = 12
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
+        check_range("every_n_frames", self.every_n_frames, 1, 100000)
+        if self.codec not in CODECS:
+            raise ConfigError(f"codec = {self.codec!r} is unknown; choose one of {CODECS}")
+        check_range("jpeg_quality", self.jpeg_quality, 1, 100)
+        check_range("png_compression", self.png_compression, 0, 9)
+        check_range("adc_bits", self.adc_bits, 8, 16)
+
+
+@dc.dataclass(frozen=True, eq=False)
+class StereoFrame:
+    """One stereo frame as sent: ``frame_index``, capture time ``t_capture_s`` (s),
+    ``codec`` and the encoded ``left`` and ``right`` images (uint8 arrays of bytes)."""
+
+    frame_index: int
+    t_capture_s: float
+    codec: str
+    left: np.ndarray
+    right: np.ndarray
+
+    def size_bytes(self) -> int:
+        """Encoded size: the header and both images."""
+        return HEADER_BYTES + int(self.left.nbytes) + int(self.right.nbytes)
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+def encode_frame(raw, *, config: ImageDownlinkConfig) -> np.ndarray:
+    """The encoded bytes (uint8 array) of one raw frame (uint16 codes of
+    ``config.adc_bits`` bits)."""
+    import cv2
+
+    a = np.ascontiguousarray(np.asarray(raw))
+    if a.ndim != 2 or a.dtype != np.uint16:
+        raise ValueError(f"raw frame must be a 2-D uint16 array, got {a.dtype} {a.shape}")
+    if config.codec == "png":
+        ok, buf = cv2.imencode(".png", a, [cv2.IMWRITE_PNG_COMPRESSION, config.png_compression])
+    else:
+        top8 = (a >> max(config.adc_bits - 8, 0)).clip(0, 255).astype(np.uint8)
+        ok, buf = cv2.imencode(".jpg", top8, [cv2.IMWRITE_JPEG_QUALITY, config.jpeg_quality])
+    if not ok:
+        raise ValueError(f"OpenCV could not encode a {a.shape} frame as {config.codec}")
+    buf = np.asarray(buf, dtype=np.uint8).ravel()
+    buf.setflags(write=False)
+    return buf
+
+
+def decode_frame(buf, *, codec: str, adc_bits: int = 12) -> np.ndarray:
+    """The raw codes (uint16) of an encoded frame: exact for PNG; for JPEG the 8 bits
+    sent, shifted back to ``adc_bits`` (the low bits are lost)."""
+    import cv2
+
+    img = cv2.imdecode(np.asarray(buf, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ValueError(f"could not decode a {codec} frame of {len(buf)} bytes")
+    if codec == "png":
+        return img.astype(np.uint16)
+    return img.astype(np.uint16) << max(adc_bits - 8, 0)
+
+
+__all__ = [
+    "CODECS",
+    "HEADER_BYTES",
+    "ImageDownlinkConfig",
+    "StereoFrame",
+    "decode_frame",
+    "encode_frame",
+]

@@ -1,0 +1,116 @@
+"""ImagePacketizer (flight) and ImageReceiver (ground): camera frames over the downlink
+(:mod:`lunar_drake.comms.images`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, encode_frame
+from lunar_drake.comms.messages import Ledger, Message
+
+TOPIC = "images"
+
+
+class ImagePacketizer(LeafSystem):
+    """Flight: compresses each selected stereo frame into an ``images`` message.
+
+    .. pydrake_system::
+
+        name: ImagePacketizer
+        input_ports:
+        - frame_index
+        - left.raw
+        - right.raw
+        output_ports:
+        - images
+
+    Every ``period_s`` from ``offset_s`` (just after a frame is delivered) it checks the
+    camera's ``frame_index``; a new frame whose index is a multiple of
+    ``config.every_n_frames`` is encoded (:func:`~lunar_drake.comms.images.encode_frame`)
+    and published: ``images`` is an outbox (a tuple with the newest message; topic
+    ``images``, seq = frames sent so far, payload a
+    :class:`~lunar_drake.comms.images.StereoFrame`). Inputs are camera sensor outputs.
+    State (abstract): (last frame index seen, frames sent, outbox).
+    """
+
+    def __init__(self, *, config: ImageDownlinkConfig, period_s: float, offset_s: float):
+        super().__init__()
+        config.validate()
+        self._config = config
+        self.frame_index_input = self.DeclareVectorInputPort("frame_index", 1)
+        blank = AbstractValue.Make(np.zeros((1, 1), np.uint16))
+        self.left_input = self.DeclareAbstractInputPort("left.raw", blank)
+        self.right_input = self.DeclareAbstractInputPort("right.raw", blank.Clone())
+        self._state = self.DeclareAbstractState(AbstractValue.Make((-1, 0, ())))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
+        self.images_output = self.DeclareAbstractOutputPort(
+            TOPIC,
+            lambda: AbstractValue.Make(()),
+            lambda c, o: o.set_value(c.get_abstract_state(self._state).get_value()[2]),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )
+
+    def _update(self, context, state):
+        last, sent, previous = context.get_abstract_state(self._state).get_value()
+        k = int(self.frame_index_input.Eval(context)[0])
+        if k < 0 or k == last:
+            if previous:  # the outbox holds only what the latest update made
+                state.get_mutable_abstract_state(self._state).set_value((last, sent, ()))
+            return
+        outbox = ()
+        if k % self._config.every_n_frames == 0:
+            frame = StereoFrame(
+                frame_index=k,
+                t_capture_s=context.get_time(),
+                codec=self._config.codec,
+                left=encode_frame(self.left_input.Eval(context), config=self._config),
+                right=encode_frame(self.right_input.Eval(context), config=self._config),
+            )
+            msg = Message(topic=TOPIC, seq=sent, t_sent_s=context.get_time(), payload=frame,
+                          size_bytes=frame.size_bytes())  # fmt: skip
+            outbox, sent = (msg,), sent + 1
+        state.get_mutable_abstract_state(self._state).set_value((k, sent, outbox))
+
+
+class ImageReceiver(LeafSystem):
+    """Ground: takes in the stereo frames the downlink delivered, in order, once each.
+
+    .. pydrake_system::
+
+        name: ImageReceiver
+        input_ports:
+        - images
+        output_ports:
+        - frames_received
+
+    Every 1 / ``rate_hz`` s deliveries newer than the last handled are appended to the
+    received ledger (abstract state; :meth:`received`). ``frames_received`` (1,) counts
+    them.
+    """
+
+    def __init__(self, *, rate_hz: float):
+        super().__init__()
+        self.images_input = self.DeclareAbstractInputPort(TOPIC, AbstractValue.Make(()))
+        self._ledger = self.DeclareAbstractState(AbstractValue.Make((-1, Ledger())))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
+        self.frames_received_output = self.DeclareVectorOutputPort(
+            "frames_received",
+            BasicVector(1),
+            lambda c, o: o.SetFromVector([len(c.get_abstract_state(self._ledger).get_value()[1])]),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )
+
+    def received(self, context) -> list:
+        """Every delivery handled so far (oldest first), in this system's context."""
+        return context.get_abstract_state(self._ledger).get_value()[1].items()
+
+    def _update(self, context, state):
+        last, ledger = context.get_abstract_state(self._ledger).get_value()
+        new = [d for d in self.images_input.Eval(context) if d.message.seq > last]
+        if not new:
+            return
+        for d in new:
+            ledger = ledger.append(d)
+        state.get_mutable_abstract_state(self._ledger).set_value((new[-1].message.seq, ledger))
