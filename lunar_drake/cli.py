@@ -164,6 +164,23 @@ def _cmd_run(args) -> int:
             f"Goals: {got} of {len(summary['goals'])} reached (truth; the last one "
             f"{final:.2f} m away at the end)"
         )
+    gr = summary["ground"]
+    if gr["goals"]:
+        on_ground = sum(g["status"] == "reached" for g in gr["goals"])
+        hz = summary["hazards"]
+        print(
+            f"Ground: {on_ground} of {len(gr['goals'])} goals reached on its estimate, "
+            f"{_plural(gr['plans'], 'plan')} ({gr['replans']} replans); "
+            f"hazard strikes {hz['strikes']}"
+        )
+    md = summary["modes"]
+    safings = ", ".join(f"{n} {k}" for k, n in md["safings"].items()) or "none"
+    print(f"Modes: {_plural(md['count'], 'mode change')} on board; safings: {safings}")
+    if summary.get("images_received"):
+        print(
+            f"Images: the ground received {_plural(summary['images_received'], 'stereo frame')}"
+            f" ({summary['images_bytes_received'] / 1e6:.1f} MB)"
+        )
     files = outputs.run_files()
     if summary["camera_frames"]:
         files.append(f"frames/ ({_plural(summary['camera_frames'], 'stereo frame')})")

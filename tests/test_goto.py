@@ -133,3 +133,22 @@ def test_hazard_strikes_are_scored_on_truth():
     assert hz == {"belly": 1, "tilt": 1, "immobilized": 1, "strikes": 3}
     pose[(t >= 5.0) & (t < 6.0), 0] = 3.0  # never over the block
     assert metrics.hazards(scenario=s, site=site, logs=logs)["belly"] == 0
+
+
+def test_explicit_steer_crabs_back_onto_the_path_and_skid_never_does():
+    """1 m left of a leg along +x, heading along it: the crab velocity points right (-y
+    in the body), proportional to the error, capped at max_crab_fraction of the speed;
+    no crab by default (skid steer)."""
+    from lunar_drake.autonomy.follower import FollowerParams
+
+    wp = [(0.0, 0.0), (20.0, 0.0)]
+    crab = FollowerParams(crab_gain_per_s=0.05)
+    tw, _, _ = follow_step((5.0, 1.0, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.2, params=crab)
+    assert tw[1] == pytest.approx(-0.05)
+    tw, _, _ = follow_step((5.0, 0.4, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.2, params=crab)
+    assert tw[1] == pytest.approx(-0.02)
+    tw, _, _ = follow_step((5.0, -9.0, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.2,
+                           params=FollowerParams(crab_gain_per_s=1.0))  # fmt: skip
+    assert 0.0 < tw[1] <= 0.5 * tw[0] + 1e-12  # capped
+    tw, _, _ = follow_step((5.0, 1.0, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.2)
+    assert tw[1] == 0.0

@@ -138,9 +138,12 @@ def test_bumper_trips_on_each_condition_after_its_persistence_only_while_driving
     r = _bumper(31, config=cfg, wheel_rate_meas=[0.2] * 4)  # < 25 % of the command
     assert r.index("stall") == 29
     assert _bumper(40, config=cfg, wheel_rate_meas=[0.3] * 4) == [""] * 40  # 30 %: turning
-    r = _bumper(21, config=cfg, yaw_rate_encoders=0.2, yaw_rate_gyro=0.05)
+    r = _bumper(21, config=cfg, yaw_rate_encoders=0.0, yaw_rate_gyro=-0.15)  # spun round
     assert r.index("slip") == 19
-    assert _bumper(40, config=cfg, yaw_rate_encoders=0.2, yaw_rate_gyro=0.15) == [""] * 40
+    r = _bumper(21, config=cfg, yaw_rate_encoders=0.2, yaw_rate_gyro=-0.1)  # the wrong way
+    assert r.index("slip") == 19
+    # A skid-steer turn at a quarter of its kinematic rate: within the allowance.
+    assert _bumper(40, config=cfg, yaw_rate_encoders=0.2, yaw_rate_gyro=0.05) == [""] * 40
     # Not driving: nothing trips, whatever the sensors say.
     assert _bumper(40, config=cfg, driving=False, pitch_rad=1.0) == [""] * 40
     # A condition must hold without a break.
@@ -279,7 +282,7 @@ def test_a_goal_fails_after_max_replans_or_when_the_planner_refuses_it():
 
 
 def test_a_safed_rover_is_resumed_and_replanned_and_lost_commands_are_resent():
-    g = Ground(params=OperatorParams(max_resumes=1, ack_timeout_s=20.0, heartbeat_s=5.0))
+    g = Ground(params=OperatorParams(max_resumes=2, ack_timeout_s=20.0, heartbeat_s=5.0))
     g.tick(0.0, Request("goal", (10.0, 0.0)))
     first = g.goto_seq()
     g.telemetry(5.0, xy=(1, 0), mode="safed", motion_seq=first, changes=2, reason=1)
@@ -294,10 +297,19 @@ def test_a_safed_rover_is_resumed_and_replanned_and_lost_commands_are_resent():
     assert g.tick(20.0) == []
     out = g.tick(25.2)
     assert isinstance(out[0], ResumeCommand) and isinstance(out[1], GotoCommand)
-    # A second safing: max_resumes (1) is spent, the ground leaves it to a person.
+    # A second safing: max_resumes (2, the resent one included) is spent: the ground
+    # leaves it to a person, and resends nothing to a rover that would ignore it.
     g.telemetry(40.0, xy=(3, 0), mode="safed", motion_seq=g.goto_seq(), changes=4, reason=2)
     assert g.tick(40.1) == []
+    assert g.tick(70.0) == [] and g.tick(100.0) == []
     assert [e.kind for e in g.state.events.items()].count("safed") == 2
+    out = g.tick(101.0, Request("resume"))  # the operator's own resume replans
+    assert isinstance(out[0], ResumeCommand) and out[1].waypoints[0] == (3.0, 0.0)
+    # That goto is never acknowledged and the rover is still safed, no resumes left:
+    # nothing is resent (a safed rover ignores gotos); the ground notes it once.
+    g.telemetry(130.0, xy=(3, 0), mode="safed", motion_seq=first, changes=6, reason=2)
+    assert g.tick(130.1) == [] and g.tick(160.0) == [] and g.tick(200.0) == []
+    assert [e.kind for e in g.state.events.items()].count("left_safed") == 1
 
 
 def test_stop_pauses_goals_resume_replans_and_deviation_replans():

@@ -6,8 +6,12 @@ returns a chassis twist: it aims at the point ``lookahead_m`` ahead along the pa
 than ``turn_in_place_rad`` off the heading, and otherwise drives an arc of curvature
 ``2 sin(alpha) / d`` (pure pursuit; ``alpha`` the bearing of the aim point, ``d`` its
 distance) at ``speed_mps`` times ``cos(alpha)``. Both steering kinds drive arcs and turn
-in place (the rover kinematics turn a twist into wheel speeds and steering angles).
-The path is done when the estimate is within ``tolerance_m`` of the last waypoint.
+in place (the rover kinematics turn a twist into wheel speeds and steering angles); an
+explicit-steer rover also **crabs** (``crab_gain_per_s`` > 0): a sideways velocity
+``-crab_gain_per_s * e`` (``e`` the signed cross-track error from the current leg, at
+most ``max_crab_fraction`` of the forward speed) pulls it back onto the path without
+turning. The path is done when the estimate is within ``tolerance_m`` of the last
+waypoint.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ class FollowerParams:
     max_wz_radps: float = 0.2
     turn_in_place_rad: float = math.radians(50.0)
     min_speed_fraction: float = 0.3
+    crab_gain_per_s: float = 0.0
+    max_crab_fraction: float = 0.5
 
 
 def _wrap(a: float) -> float:
@@ -78,7 +84,18 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     v = speed_mps * max(math.cos(alpha), params.min_speed_fraction)
     wz = 2.0 * v * math.sin(alpha) / d
     wz = max(-params.max_wz_radps, min(params.max_wz_radps, wz))
-    return np.array([v, 0.0, wz]), index, False
+    vy = 0.0
+    if params.crab_gain_per_s > 0.0 and len(wp) >= 2:
+        a, b = wp[min(index, len(wp) - 2)], wp[min(index, len(wp) - 2) + 1]
+        leg = b - a
+        n = float(np.hypot(*leg))
+        if n > 1e-9:
+            e = (leg[0] * (y - a[1]) - leg[1] * (x - a[0])) / n  # left of the leg: > 0
+            # The leg's left normal in the body frame (its y component).
+            ny = math.cos(math.atan2(leg[1], leg[0]) - yaw)
+            lim = params.max_crab_fraction * v
+            vy = max(-lim, min(lim, -params.crab_gain_per_s * e * ny))
+    return np.array([v, vy, wz]), index, False
 
 
 __all__ = ["FollowerParams", "aim_point", "follow_step"]

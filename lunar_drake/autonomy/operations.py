@@ -14,8 +14,10 @@ returns the commands to send up:
   rover drives, an estimate more than ``replan_deviation_m`` off the planned path
   makes the ground stop it and replan. A goal added while driving waits its turn.
 * **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
-  ``max_resumes`` times) sends a resume and a goto replanned from the estimate, in one
-  uplink pass (the executor handles them in order).
+  ``max_resumes`` resumes sent in a run, resent ones included) sends a resume and a goto
+  replanned from the estimate, in one uplink pass (the executor handles them in order).
+* **lost**: a goto telemetry has not acknowledged after ``ack_timeout_s`` is sent again
+  (with a resume if the rover is safed and resumes are left).
 * **requests**: ``stop`` (stop, and pause goal driving), ``resume`` (resume, and
   continue the goals from the estimate), ``drive_arc`` (speed, curvature, distance),
   ``point_mast`` (pan, tilt; or automatic), ``goal`` (x, y), ``drive`` (a route
@@ -320,14 +322,21 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
                 if active < 0:
                     start_next()
         elif not acked and now - goto_sent > params.ack_timeout_s:
-            # Not acknowledged: lost on the way up (an outage, out of sight of Earth).
+            # Not acknowledged: lost on the way up (an outage, out of sight of Earth), or
+            # ignored by a safed rover.
             note("no_ack", f"goto seq {goto_seq} sent at {goto_sent:.1f} s")
-            if mode == "safed":
-                send(ResumeCommand())
-                note("resume", "with the resent goto")
-            plan_goto("resend")
-            if active < 0:
-                start_next()
+            can_resume = params.auto_resume and resumes < params.max_resumes
+            if mode == "safed" and not can_resume:
+                goto_sent = math.inf  # safed for good: left to the operator's resume
+                note("left_safed", f"{resumes} automatic resumes spent")
+            else:
+                if mode == "safed":
+                    send(ResumeCommand())
+                    resumes += 1
+                    note("resume", f"with the resent goto ({resumes} of {params.max_resumes})")
+                plan_goto("resend")
+                if active < 0:
+                    start_next()
         elif acked and mode in ("waiting", "idle"):
             err = math.hypot(pose[0] - goals[active][0], pose[1] - goals[active][1])
             if err <= params.goal_tolerance_m:

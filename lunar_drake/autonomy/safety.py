@@ -8,9 +8,11 @@ While a command drives the wheels, :func:`bumper_step` watches, each bumper tick
   their commanded rate for ``stall_persist_s`` (a motor at its torque limit, a wheel
   jammed or dug in to the axle);
 * **slip** -- the yaw rate the encoders imply (rover kinematics) disagreeing with the
-  gyro's by more than ``max_yaw_slip_radps`` for ``slip_persist_s``: the chassis turns
-  (or does not) against what its wheels say -- skidding sideways, sliding down a slope,
-  a wheel spinning on one side. Longitudinal slip (wheels turning, chassis not moving
+  gyro's by more than ``max_yaw_slip_radps + yaw_slip_fraction |encoder rate|`` for
+  ``slip_persist_s``: the chassis turns against what its wheels say -- spun round by a
+  slide down a slope, a wheel spinning on one side. The fraction leaves room for a
+  skid-steer rover, which on this soil turns at only 25-50 % of its kinematic rate
+  (measured on the ``skid`` mission). Longitudinal slip (wheels turning, chassis not moving
   as much) is not observable on board without visual odometry: the EKF carries it as an
   unobserved state (:mod:`lunar_drake.autonomy.ekf`); the ground's VO measures it.
 
@@ -45,7 +47,8 @@ class SafetyConfig:
         stall_speed_fraction: wheels slower than this fraction of the commanded rate
             (mean over wheels) count as stalled.
         stall_persist_s: how long (s).
-        max_yaw_slip_radps: largest encoder-vs-gyro yaw-rate disagreement (rad/s).
+        max_yaw_slip_radps: largest encoder-vs-gyro yaw-rate disagreement (rad/s) ...
+        yaw_slip_fraction: ... plus this fraction of the encoders' yaw rate.
         slip_persist_s: how long beyond it (s).
         uplink_timeout_s: safe when no uplink message (heartbeats included) has arrived
             for this long while a command runs (s); 0: never.
@@ -58,6 +61,7 @@ class SafetyConfig:
     stall_speed_fraction: float = 0.25
     stall_persist_s: float = 3.0
     max_yaw_slip_radps: float = 0.1
+    yaw_slip_fraction: float = 0.8
     slip_persist_s: float = 3.0
     uplink_timeout_s: float = 60.0
 
@@ -71,6 +75,7 @@ class SafetyConfig:
         check_range("stall_persist_s", self.stall_persist_s, 0.0, 3600.0, unit=" s")
         check_range("max_yaw_slip_radps", self.max_yaw_slip_radps, 0.0, 10.0, lo_open=True,
                     unit=" rad/s")  # fmt: skip
+        check_range("yaw_slip_fraction", self.yaw_slip_fraction, 0.0, 10.0)
         check_range("slip_persist_s", self.slip_persist_s, 0.0, 3600.0, unit=" s")
         check_range("uplink_timeout_s", self.uplink_timeout_s, 0.0, 1.0e6, unit=" s")
 
@@ -99,7 +104,8 @@ def bumper_step(timers, *, dt_s: float, driving: bool, roll_rad: float, pitch_ra
     stalled = turning_wheels and float(meas.mean()) < config.stall_speed_fraction * float(
         cmd.mean()
     )
-    slipping = turning_wheels and abs(yaw_rate_encoders - yaw_rate_gyro) > config.max_yaw_slip_radps
+    allowed = config.max_yaw_slip_radps + config.yaw_slip_fraction * abs(yaw_rate_encoders)
+    slipping = turning_wheels and abs(yaw_rate_encoders - yaw_rate_gyro) > allowed
     for k, on in enumerate((tilted, stalled, slipping)):
         t[k] = t[k] + dt_s if on else 0.0
     persist = (config.tilt_persist_s, config.stall_persist_s, config.slip_persist_s)

@@ -20,6 +20,7 @@ import math
 
 from pydrake.systems.framework import DiagramBuilder
 
+from lunar_drake.autonomy.follower import FollowerParams
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
@@ -73,6 +74,8 @@ def MakeFlightDiagram(*, scenario: Scenario):
             rate_hz=f.rate_hz,
             brake_delay_s=f.brake_delay_s,
             uplink_timeout_s=f.safety.uplink_timeout_s,
+            # Explicit steer crabs back onto the path; skid steer cannot move sideways.
+            follower=FollowerParams(crab_gain_per_s=0.0 if d.steering == "skid" else 0.3),
         ),
     )
     bumper = builder.AddNamedSystem("flight.bumper", VirtualBumper(description=d, config=f.safety))

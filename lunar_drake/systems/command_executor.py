@@ -47,10 +47,13 @@ class CommandExecutor(LeafSystem):
         rate_hz: tick rate (Hz). brake_delay_s: stand-still time before braking (s).
         uplink_timeout_s: safe the rover when a command runs and nothing came up the
             uplink for this long (s; 0: never).
+        follower: :class:`~lunar_drake.autonomy.follower.FollowerParams` for gotos.
     """
 
-    def __init__(self, *, rate_hz: float, brake_delay_s: float, uplink_timeout_s: float = 0.0):
+    def __init__(self, *, rate_hz: float, brake_delay_s: float, uplink_timeout_s: float = 0.0,
+                 follower=None):  # fmt: skip
         super().__init__()
+        self._follower = follower
         self._rate = float(rate_hz)
         self._brake_delay = float(brake_delay_s)
         self._uplink_timeout = float(uplink_timeout_s)
@@ -104,6 +107,7 @@ class CommandExecutor(LeafSystem):
             pose=pose,
             trip=trip,
             uplink_timeout_s=self._uplink_timeout,
+            follower=self._follower,
         )
         state.get_mutable_abstract_state(self._core).set_value(core)
         held, pan, tilt = (0.0, 0.0, 0.0) if out.mast is None else (1.0, *out.mast)
