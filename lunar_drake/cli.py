@@ -182,6 +182,8 @@ def _cmd_run(args) -> int:
             f" ({summary['images_bytes_received'] / 1e6:.1f} MB)"
         )
     files = outputs.run_files()
+    if scenario.sensors.camera.enabled:
+        files.append("calibration.yaml")
     if summary["camera_frames"]:
         files.append(f"frames/ ({_plural(summary['camera_frames'], 'stereo frame')})")
     if meshcat is not None:

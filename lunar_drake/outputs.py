@@ -6,7 +6,8 @@ A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake ru
 ``telemetry.csv`` (what the ground received), ``link.csv`` (every message over the
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
-the ground received, compressed), ``frames/`` (written during the
+the ground received, compressed), ``calibration.yaml`` (the stereo rig, OpenCV style;
+with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
 The CLI builds it in a temporary sibling directory and swaps it in when complete
 (:func:`lunar_drake.files.staged_directory`).
@@ -55,6 +56,7 @@ RUN_DIR_NAMES = frozenset(
         "modes.csv",
         "ground_events.csv",
         "images.csv",
+        "calibration.yaml",
         "frames",
         "meshcat.html",
     ]
@@ -157,6 +159,13 @@ def write_run(
     write_csv(out / "images.csv", ["t_received_s", "t_sent_s", "frame_index", "codec", "bytes"],
               rows)  # fmt: skip
     paths.append(out / "images.csv")
+    if scenario.sensors.camera.enabled:
+        from lunar_drake.perception.calibration import StereoCalibration
+
+        StereoCalibration.from_camera(
+            camera=scenario.sensors.camera, description=scenario.rover.description
+        ).write(out / "calibration.yaml")
+        paths.append(out / "calibration.yaml")
     if meshcat_html is not None:
         paths.append(atomic_write_text(out / "meshcat.html", meshcat_html))
     return paths

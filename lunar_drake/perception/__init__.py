@@ -1,0 +1,1 @@
+"""Ground perception: stereo from the downlinked frames (Drake-free; OpenCV)."""
