@@ -35,14 +35,18 @@ import numpy as np
 from lunar_drake.files import atomic_write_text, check_output_file
 
 
-def render_pair(scenario, site, *, yaw_deg: float):
-    """(left raw, right raw, left true depth, left preview) at t = 0 after the first frame."""
+def render_pair(scenario, site, *, yaw_deg: float, forward_m: float = 0.0):
+    """(left raw, right raw, left true depth, left preview, X_WC of the left camera
+    (4 x 4, truth)) two frames in, the rover spawned ``forward_m`` ahead along its
+    heading."""
     from pydrake.systems.analysis import Simulator
 
     from lunar_drake.diagrams.mission import MakeMissionDiagram
 
     s = copy.deepcopy(scenario)
     s.rover.spawn_yaw_deg = yaw_deg
+    s.rover.spawn_x_m += forward_m * math.cos(math.radians(yaw_deg))
+    s.rover.spawn_y_m += forward_m * math.sin(math.radians(yaw_deg))
     s.sensors.camera.enabled = True
     s.flight.images.enabled = False
     s.ground.goals = []
@@ -55,7 +59,10 @@ def render_pair(scenario, site, *, yaw_deg: float):
     cam = mission.GetSubsystemByName("plant").GetSubsystemByName("camera")
     ctx = cam.GetMyContextFromRoot(sim.get_context())
     left, right = cam.frame(ctx, "left"), cam.frame(ctx, "right")
-    return left.raw, right.raw, left.depth, left.preview
+    mbp = mission.GetSubsystemByName("plant").GetSubsystemByName("plant")
+    pctx = mbp.GetMyContextFromRoot(sim.get_context())
+    X_WC = mbp.GetFrameByName("left_camera").CalcPoseInWorld(pctx).GetAsMatrix4()
+    return left.raw, right.raw, left.depth, left.preview, X_WC
 
 
 def main(argv=None) -> int:
@@ -65,6 +72,8 @@ def main(argv=None) -> int:
     p.add_argument("--yaws", default="0,90,180,270", help="rover headings (deg), sunlit")
     p.add_argument("--out", default=None)
     p.add_argument("--images", default=None, help="write preview/disparity/error PNGs here")
+    p.add_argument("--vo-step", type=float, default=0.5,
+                   help="ICP visual odometry over this forward step (m; 0: off)")  # fmt: skip
     a = p.parse_args(argv)
     if a.out:
         check_output_file(a.out, what="results JSON")
@@ -88,7 +97,7 @@ def main(argv=None) -> int:
     for name, scen, yaw in scenes:
         calib = StereoCalibration.from_camera(camera=scen.sensors.camera,
                                               description=scen.rover.description)  # fmt: skip
-        left, right, depth, preview = render_pair(scen, site, yaw_deg=yaw)
+        left, right, depth, preview, X_WC = render_pair(scen, site, yaw_deg=yaw)
         t0 = time.perf_counter()
         res = match(left, right, calib=calib, config=config)
         t_match = time.perf_counter() - t0
@@ -99,6 +108,8 @@ def main(argv=None) -> int:
                      "median_code": float(np.median(left))})  # fmt: skip
         if a.images:
             _write_images(Path(a.images), f"{name}_{int(yaw)}", preview, res, depth)
+        if name == "sunlit" and a.vo_step > 0:
+            rows[-1]["vo"] = _vo(scen, site, yaw, a.vo_step, calib, config, res, X_WC)
     out = {"width": a.width, "height": a.height, "config": vars(config), "runs": rows}
     for name in ("sunlit", "earthshine"):
         r = [x for x in rows if x["scene"] == name]
@@ -112,6 +123,15 @@ def main(argv=None) -> int:
         print(f"{r['scene']:>11} {r['yaw_deg']:5.0f} {r['median_abs_error_pct']:15.2f} "
               f"{r['valid_fraction']:7.3f} {r['pixels_2_10_m']:10d} {r['match_s']:8.2f} "
               f"{r['median_code']:12.0f}")  # fmt: skip
+    for r in rows:
+        if "vo" in r:
+            v = r["vo"]
+            print(f"VO yaw {r['yaw_deg']:.0f}: {v['step_m']:.2f} m step, error "
+                  f"{100 * v['vo_error_m']:.1f} cm / {v['vo_error_deg']:.2f} deg (guess "
+                  f"{100 * v['guess_error_m']:.1f} cm / {v['guess_error_deg']:.2f} deg), "
+                  f"fitness {v['fitness']:.2f}, rmse {100 * v['inlier_rmse_m']:.1f} cm, "
+                  f"condition {v['condition']:.3g}"
+                  + (f", REJECTED: {v['reason']}" if v["rejected"] else ""))  # fmt: skip
     for name in ("sunlit", "earthshine"):
         print(
             f"{name}: median error {out[name]['median_abs_error_pct']:.2f} % of depth, "
@@ -120,6 +140,34 @@ def main(argv=None) -> int:
     if a.out:
         atomic_write_text(a.out, json.dumps(out, indent=2) + "\n", what="results JSON")
     return 0
+
+
+def _vo(scen, site, yaw, step, calib, config, res0, X_WC0) -> dict:
+    """ICP between the pair at the spawn and one ``step`` m ahead (points within 10 m),
+    from the true camera motion perturbed by 5 cm and 1 deg (an on-board guess)."""
+    from lunar_drake.perception.stereo import match
+    from lunar_drake.perception.vo import align, correction
+
+    left, right, _, _, X_WC1 = render_pair(scen, site, yaw_deg=yaw, forward_m=step)
+    res1 = match(left, right, calib=calib, config=config)
+
+    def near(r):
+        c = r.cloud()
+        return c[c[:, 2] <= 10.0]
+
+    T_true = np.linalg.inv(X_WC0) @ X_WC1
+    guess = T_true.copy()
+    c, s_ = math.cos(math.radians(1.0)), math.sin(math.radians(1.0))
+    guess[:3, :3] = guess[:3, :3] @ np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]])
+    guess[:3, 3] += [0.05, 0.0, 0.0]
+    t0 = time.perf_counter()
+    al = align(near(res0), near(res1), init_T=guess)
+    dt, dr = correction(T_true, al.T_prev_curr)
+    g_dt, g_dr = correction(T_true, guess)
+    return {"step_m": step, "vo_error_m": dt, "vo_error_deg": dr, "guess_error_m": g_dt,
+            "guess_error_deg": g_dr, "fitness": al.fitness, "inlier_rmse_m": al.inlier_rmse_m,
+            "condition": al.condition, "rejected": al.rejected, "reason": al.reason,
+            "icp_s": time.perf_counter() - t0}  # fmt: skip
 
 
 def _write_images(out: Path, stem: str, preview, res, depth) -> None:
@@ -135,7 +183,6 @@ def _write_images(out: Path, stem: str, preview, res, depth) -> None:
         err = np.abs(res.depth_m - t) / t
     e8 = np.where(np.isfinite(err), np.clip(err / 0.1 * 255.0, 0, 255), 0).astype(np.uint8)
     cv2.imwrite(str(out / f"{stem}_error.png"), cv2.applyColorMap(e8, cv2.COLORMAP_INFERNO))
-    _ = math
 
 
 if __name__ == "__main__":
