@@ -303,8 +303,9 @@ class GroundConfig:
             the planned path (m).
         max_extrapolation_s: the ground carries the downlinked pose forward along the
             commanded twist for at most this long (s).
-        ack_timeout_s: a goto that telemetry has not acknowledged after this long is
-            taken as lost and sent again, replanned (s).
+        ack_timeout_s: a goto (or resume) that telemetry has not acknowledged after this
+            long is taken as lost and sent again, replanned (s).
+        max_resends: at most this many times per goal (or resume).
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
             (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
@@ -324,6 +325,7 @@ class GroundConfig:
     replan_deviation_m: float = 2.0
     max_extrapolation_s: float = 10.0
     ack_timeout_s: float = 20.0
+    max_resends: int = 5
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
 
@@ -500,6 +502,13 @@ def validate_scenario(s: Scenario) -> None:
         check_range(f"ground.goals[{k}].x_m", g.x_m, -1e6, 1e6, unit=" m")
         check_range(f"ground.goals[{k}].y_m", g.y_m, -1e6, 1e6, unit=" m")
     _validate_ground(s.ground)
+    timeout = s.flight.safety.uplink_timeout_s
+    if timeout > 0 and s.ground.heartbeat_s > 0.5 * timeout:
+        raise OutOfRangeError(
+            f"ground.heartbeat_s = {s.ground.heartbeat_s:g} s must be at most half of "
+            f"flight.safety.uplink_timeout_s = {timeout:g} s (the rover safes when the "
+            "uplink is silent that long)"
+        )
     _section("ground.map", s.ground.map.validate)
     _section("ground.hazards", s.ground.hazards.validate)
     _section("comms.uplink", s.comms.uplink.validate)
@@ -526,6 +535,7 @@ def _validate_ground(g: GroundConfig) -> None:
     check_range("ground.replan_deviation_m", g.replan_deviation_m, 0.1, 1000.0, unit=" m")
     check_range("ground.max_extrapolation_s", g.max_extrapolation_s, 0.0, 3600.0, unit=" s")
     check_range("ground.ack_timeout_s", g.ack_timeout_s, 1.0, 3600.0, unit=" s")
+    check_range("ground.max_resends", g.max_resends, 0, 1000)
     for k, a in enumerate(g.actions):
         key = f"ground.actions[{k}]"
         if a.action not in ACTIONS:

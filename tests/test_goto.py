@@ -152,3 +152,8 @@ def test_explicit_steer_crabs_back_onto_the_path_and_skid_never_does():
     assert 0.0 < tw[1] <= 0.5 * tw[0] + 1e-12  # capped
     tw, _, _ = follow_step((5.0, 1.0, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.2)
     assert tw[1] == 0.0
+    # On its leg next to a corner (the aim point already on the next leg): no crab.
+    corner = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]
+    tw, _, _ = follow_step((9.0, 0.0, 0.5), corner, 0, speed_mps=0.2, tolerance_m=0.2,
+                           params=crab)  # fmt: skip
+    assert abs(tw[1]) < 1e-12

@@ -282,7 +282,8 @@ def test_a_goal_fails_after_max_replans_or_when_the_planner_refuses_it():
 
 
 def test_a_safed_rover_is_resumed_and_replanned_and_lost_commands_are_resent():
-    g = Ground(params=OperatorParams(max_resumes=2, ack_timeout_s=20.0, heartbeat_s=5.0))
+    g = Ground(params=OperatorParams(max_resumes=1, ack_timeout_s=20.0, heartbeat_s=5.0,
+                                     max_resends=3))  # fmt: skip
     g.tick(0.0, Request("goal", (10.0, 0.0)))
     first = g.goto_seq()
     g.telemetry(5.0, xy=(1, 0), mode="safed", motion_seq=first, changes=2, reason=1)
@@ -292,24 +293,42 @@ def test_a_safed_rover_is_resumed_and_replanned_and_lost_commands_are_resent():
     # The same safing seen again (the resume is still on its way): nothing new.
     g.telemetry(6.0, xy=(1, 0), mode="safed", motion_seq=first, changes=2, reason=1)
     assert g.tick(6.1) == []
-    # Never acknowledged (lost on the way up): resent, with a resume, after the timeout.
+    # Neither acknowledged (lost on the way up): after the timeout the resume goes again,
+    # then a stop (a stale copy may yet run) and the replanned goto.
     g.telemetry(20.0, xy=(1, 0), mode="safed", motion_seq=first, changes=2, reason=1)
     assert g.tick(20.0) == []
     out = g.tick(25.2)
-    assert isinstance(out[0], ResumeCommand) and isinstance(out[1], GotoCommand)
-    # A second safing: max_resumes (2, the resent one included) is spent: the ground
-    # leaves it to a person, and resends nothing to a rover that would ignore it.
+    assert [type(c) for c in out] == [ResumeCommand, StopCommand, GotoCommand]
+    # A second safing: max_resumes (1) is spent: the ground leaves it to a person, and
+    # resends nothing to a rover that would ignore it.
     g.telemetry(40.0, xy=(3, 0), mode="safed", motion_seq=g.goto_seq(), changes=4, reason=2)
     assert g.tick(40.1) == []
     assert g.tick(70.0) == [] and g.tick(100.0) == []
-    assert [e.kind for e in g.state.events.items()].count("safed") == 2
+    kinds = [e.kind for e in g.state.events.items()]
+    assert kinds.count("safed") == 2 and kinds.count("resume") == 2  # auto, sent again
     out = g.tick(101.0, Request("resume"))  # the operator's own resume replans
     assert isinstance(out[0], ResumeCommand) and out[1].waypoints[0] == (3.0, 0.0)
-    # That goto is never acknowledged and the rover is still safed, no resumes left:
-    # nothing is resent (a safed rover ignores gotos); the ground notes it once.
-    g.telemetry(130.0, xy=(3, 0), mode="safed", motion_seq=first, changes=6, reason=2)
-    assert g.tick(130.1) == [] and g.tick(160.0) == [] and g.tick(200.0) == []
-    assert [e.kind for e in g.state.events.items()].count("left_safed") == 1
+    # That resume is lost too: sent again every ack_timeout_s, max_resends (3) times.
+    g.telemetry(130.0, xy=(3, 0), mode="safed", motion_seq=first, changes=4, reason=2)
+    again = [t for t in np.arange(130.0, 400.0, 0.5)
+             if ResumeCommand() in g.tick(float(t))]  # fmt: skip
+    assert len(again) == 3 and np.all(np.diff(again) > 20.0)
+
+
+def test_a_goto_never_acknowledged_fails_its_goal_after_max_resends():
+    """An uplink that drops every goto (too big for its bucket): stop and resend,
+    max_resends times, then the goal fails and the next one starts."""
+    g = Ground(params=OperatorParams(ack_timeout_s=10.0, max_resends=2, heartbeat_s=5.0))
+    g.tick(0.0, Request("goal", (10.0, 0.0)), Request("goal", (0.0, 10.0)))
+    g.telemetry(1.0, xy=(0, 0), mode="idle")
+    for t in np.arange(1.0, 35.0, 0.5):  # no acknowledgement at 10.5, 21, 31.5 s
+        g.tick(float(t))
+    kinds = [e.kind for e in g.state.events.items()]
+    assert kinds.count("no_ack") == 3
+    assert g.state.status == ("failed", "active")
+    assert "not acknowledged after 2 resends" in next(
+        e.detail for e in g.state.events.items() if e.kind == "goal_failed"
+    )
 
 
 def test_stop_pauses_goals_resume_replans_and_deviation_replans():
@@ -360,12 +379,13 @@ def _goto_mission(cache_text):
 
 
 def test_uplink_outage_safes_the_rover_and_the_ground_recovers_it(cache):
-    """The uplink is down from 10 s to 40 s: after 5 s of silence the rover safes; the
+    """The uplink is down from 10 s to 40 s: after 5 s of silence (heartbeats every 2 s
+    before it) the rover safes; the
     ground, seeing it, resumes and replans (lost on the way up, then resent after the
     outage) and the goal is reached."""
     logs, summary = _goto_mission(
         "{simulation_duration: 160, flight: {safety: {uplink_timeout_s: 5}},"
-        " comms: {uplink: {outages: [{start_s: 10, end_s: 40}]}}}"
+        " ground: {heartbeat_s: 2}, comms: {uplink: {outages: [{start_s: 10, end_s: 40}]}}}"
     )
     modes = summary["modes"]
     assert modes["safings"] == {"uplink_loss": 1}
@@ -448,3 +468,14 @@ def test_the_operator_api_drives_the_mission_between_advances(cache):
     assert pose.Eval(ctx)[0] < x_before - 0.3  # backed up
     kinds = [e.kind for e in st.events.items()]
     assert kinds[:2] == ["goal", "plan"] and "stop" in kinds and "resume" in kinds
+
+
+def test_a_safed_rover_with_no_resumes_left_is_left_to_the_operator():
+    g = Ground(params=OperatorParams(max_resumes=0, ack_timeout_s=20.0, heartbeat_s=5.0))
+    g.tick(0.0, Request("goal", (10.0, 0.0)))
+    g.telemetry(5.0, xy=(0, 0), mode="safed", motion_seq=-1, changes=2, reason=4)
+    assert g.tick(5.1) == []
+    assert g.tick(20.5) == [] and g.tick(60.0) == [] and g.tick(200.0) == []
+    kinds = [e.kind for e in g.state.events.items()]
+    assert kinds.count("no_ack") == 1 and kinds.count("left_safed") == 1
+    assert [e.detail for e in g.state.events.items() if e.kind == "safed"] == ["uplink_loss"]

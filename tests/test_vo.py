@@ -91,3 +91,19 @@ def test_point_to_plane_information_sees_which_motions_the_geometry_fixes():
 def test_vo_config_errors_name_the_field():
     with pytest.raises(OutOfRangeError, match="min_fitness"):
         align(np.zeros((20, 3)), np.zeros((20, 3)), config=VoConfig(min_fitness=2.0))
+
+
+def test_the_conditioning_does_not_grow_with_the_range_of_the_cloud():
+    """The same patch 2 m or 30 m in front of the camera: the same condition number
+    (rotations are taken about the matched points' centroid, in units of their spread)."""
+    P = _terrain(seed=4)
+    T = _T([3, 0, 0], [0.2, 0.0, 0.0])
+    C = _seen_from(T, P)
+    conds = []
+    for far in (2.0, 30.0):
+        shift = np.array([0.0, 0.0, far])
+        a = align(P + shift, C + shift, init_T=np.linalg.inv(_T([0, 0, 0], -shift)) @ T
+                  @ _T([0, 0, 0], -shift))  # fmt: skip
+        assert not a.rejected, a.reason
+        conds.append(a.condition)
+    assert conds[1] == pytest.approx(conds[0], rel=0.05)

@@ -251,7 +251,7 @@ def predict(x, P, *, gyro_radps, d_body, dt: float, config: EstimatorConfig):
     p, R, bg, s, beta = x[0:3], quat_to_matrix(x[3:7]), x[7:10], x[10], x[11]
     u = np.array([float(d_body[0]), float(d_body[1]), 0.0])
     if config.slip_vs_slope:
-        s = s + slope_slip(R, u[0], config.slip_vs_slope)
+        s = min(max(s + slope_slip(R, u[0], config.slip_vs_slope), -1.0), 0.99)
     Ru = R @ u
     Rside = R @ np.array([0.0, u[0], 0.0])
     g = 1.0 - s

@@ -86,16 +86,28 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     wz = max(-params.max_wz_radps, min(params.max_wz_radps, wz))
     vy = 0.0
     if params.crab_gain_per_s > 0.0 and len(wp) >= 2:
-        a, b = wp[min(index, len(wp) - 2)], wp[min(index, len(wp) - 2) + 1]
-        leg = b - a
-        n = float(np.hypot(*leg))
-        if n > 1e-9:
-            e = (leg[0] * (y - a[1]) - leg[1] * (x - a[0])) / n  # left of the leg: > 0
-            # The leg's left normal in the body frame (its y component).
-            ny = math.cos(math.atan2(leg[1], leg[0]) - yaw)
-            lim = params.max_crab_fraction * v
-            vy = max(-lim, min(lim, -params.crab_gain_per_s * e * ny))
+        e, heading = cross_track((x, y), wp)
+        # The path's left normal in the body frame (its y component).
+        ny = math.cos(heading - yaw)
+        lim = params.max_crab_fraction * v
+        vy = max(-lim, min(lim, -params.crab_gain_per_s * e * ny))
     return np.array([v, vy, wz]), index, False
 
 
-__all__ = ["FollowerParams", "aim_point", "follow_step"]
+def cross_track(xy, waypoints) -> tuple[float, float]:
+    """(signed distance m, positive left of the path; heading rad) of the path segment
+    nearest ``xy`` (clamped projection: near a corner, the leg the rover is on)."""
+    p = np.asarray(xy, dtype=float)
+    wp = np.asarray(waypoints, dtype=float)
+    a, b = wp[:-1], wp[1:]
+    d = b - a
+    L2 = np.maximum(np.sum(d * d, axis=1), 1e-18)
+    t = np.clip(np.sum((p - a) * d, axis=1) / L2, 0.0, 1.0)
+    q = a + t[:, None] * d
+    k = int(np.argmin(np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])))
+    n = math.sqrt(float(L2[k]))
+    e = (d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])) / n
+    return float(e), math.atan2(d[k, 1], d[k, 0])
+
+
+__all__ = ["FollowerParams", "aim_point", "cross_track", "follow_step"]

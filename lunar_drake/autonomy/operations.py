@@ -16,8 +16,10 @@ returns the commands to send up:
 * **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
   ``max_resumes`` resumes sent in a run, resent ones included) sends a resume and a goto
   replanned from the estimate, in one uplink pass (the executor handles them in order).
-* **lost**: a goto telemetry has not acknowledged after ``ack_timeout_s`` is sent again
-  (with a resume if the rover is safed and resumes are left).
+* **lost**: a goto telemetry has not acknowledged after ``ack_timeout_s`` is sent again,
+  replanned and after a stop (with a resume if the rover is safed and resumes are
+  left), at most ``max_resends`` times, then the goal fails; a resume not acknowledged
+  (the rover still safed, its command seq older) is sent again as often.
 * **requests**: ``stop`` (stop, and pause goal driving), ``resume`` (resume, and
   continue the goals from the estimate), ``drive_arc`` (speed, curvature, distance),
   ``point_mast`` (pan, tilt; or automatic), ``goal`` (x, y), ``drive`` (a route
@@ -84,8 +86,8 @@ class OperatorParams:
 
     Attributes: drive_speed_mps, goto_tolerance_m (on board), goal_tolerance_m (the
     ground's judgement on the downlinked estimate), heartbeat_s, auto_resume,
-    max_resumes, max_replans, replan_deviation_m, max_extrapolation_s, ack_timeout_s:
-    see
+    max_resumes, max_replans, replan_deviation_m, max_extrapolation_s, ack_timeout_s,
+    max_resends: see
     :class:`~lunar_drake.scenario.GroundConfig`.
     """
 
@@ -99,6 +101,7 @@ class OperatorParams:
     replan_deviation_m: float = 2.0
     max_extrapolation_s: float = 10.0
     ack_timeout_s: float = 20.0
+    max_resends: int = 5
 
 
 @dc.dataclass(frozen=True)
@@ -111,7 +114,10 @@ class OperatorState:
         active: index of the goal being driven (-1: none). paused: goal driving
             stopped by the operator. goto_seq: seq of the goto in flight (-1: none, plan
             one). goto_sent_s: when it went up. path: its waypoints. replans: replans
-            of the active goal.
+            of the active goal. resends: its gotos sent again for want of an
+            acknowledgement.
+        resume_seq, resume_sent_s: the newest resume sent (-1 none) and when;
+            resume_resends: how often it was sent again.
         resumes: automatic resumes so far. safe_seen: the telemetry ``mode_changes``
             of the newest safing handled.
         tel_seq, packet, t_sent, t_received: the newest telemetry handled (-1 / None).
@@ -129,6 +135,10 @@ class OperatorState:
     goto_sent_s: float = -math.inf
     path: tuple = ()
     replans: int = 0
+    resends: int = 0
+    resume_seq: int = -1
+    resume_sent_s: float = -math.inf
+    resume_resends: int = 0
     resumes: int = 0
     safe_seen: int = -1
     tel_seq: int = -1
@@ -211,14 +221,17 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         pose = ground_pose(packet, t_sent, now, max_extrapolation_s=params.max_extrapolation_s)
     goals, status, active, paused = s.goals, s.status, s.active, s.paused
     goto_seq, path, replans, resumes = s.goto_seq, s.path, s.replans, s.resumes
-    goto_sent = s.goto_sent_s
+    goto_sent, resends = s.goto_sent_s, s.resends
+    resume_seq, resume_sent, resume_resends = s.resume_seq, s.resume_sent_s, s.resume_resends
     seq = s.next_seq
     out = []
 
     def send(cmd):
-        nonlocal seq
+        nonlocal seq, resume_seq, resume_sent
         out.append(Message(topic=TOPIC, seq=seq, t_sent_s=now, payload=cmd,
                            size_bytes=payload_size_bytes(cmd)))  # fmt: skip
+        if isinstance(cmd, ResumeCommand):
+            resume_seq, resume_sent = seq, now
         seq += 1
         return seq - 1
 
@@ -237,7 +250,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             note("stop")
         elif r.kind == "resume":
             send(ResumeCommand())
-            paused, goto_seq = False, -1
+            paused, goto_seq, resume_resends = False, -1, 0
             note("resume")
         elif r.kind == "drive_arc":
             v, k, dist = (float(a) for a in r.args)
@@ -292,11 +305,24 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             s_seen = s.safe_seen
     else:
         s_seen = s.safe_seen
+    # A resume the rover has not acknowledged (still safed, older command seq): again.
+    if (
+        packet is not None
+        and mode == "safed"
+        and resume_seq >= 0
+        and packet[_F["command_seq"]] < resume_seq
+        and now - resume_sent > params.ack_timeout_s
+        and resume_resends < params.max_resends
+        and not any(isinstance(m.payload, ResumeCommand) for m in out)
+    ):
+        resume_resends += 1
+        send(ResumeCommand())
+        note("resume", f"sent again ({resume_resends} of {params.max_resends})")
 
     def start_next():
         # Activate pending goals in order until one gets a plan (or none is left).
-        nonlocal active, status, goto_seq, path, replans
-        active, goto_seq, path, replans = -1, -1, (), 0
+        nonlocal active, status, goto_seq, path, replans, resends
+        active, goto_seq, path, replans, resends = -1, -1, (), 0, 0
         while "pending" in status:
             active = status.index("pending")
             status = _set(status, active, "active")
@@ -316,7 +342,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             start_next()
     elif active >= 0 and not paused:
         if goto_seq < 0:
-            resumed = bool(out) and isinstance(out[-1].payload, ResumeCommand)
+            resumed = any(isinstance(m.payload, ResumeCommand) for m in out)
             if mode != "safed" or resumed:
                 plan_goto("after a resume" if resumed else "start")
                 if active < 0:
@@ -325,12 +351,17 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             # Not acknowledged: lost on the way up (an outage, out of sight of Earth), or
             # ignored by a safed rover.
             note("no_ack", f"goto seq {goto_seq} sent at {goto_sent:.1f} s")
-            can_resume = params.auto_resume and resumes < params.max_resumes
+            resuming = any(isinstance(m.payload, ResumeCommand) for m in out)
+            can_resume = resuming or (params.auto_resume and resumes < params.max_resumes)
             if mode == "safed" and not can_resume:
                 goto_sent = math.inf  # safed for good: left to the operator's resume
                 note("left_safed", f"{resumes} automatic resumes spent")
+            elif resends >= params.max_resends:
+                give_up(f"goto not acknowledged after {resends} resends")
             else:
-                if mode == "safed":
+                resends += 1
+                send(StopCommand())  # an unacknowledged copy may yet run: stop it first
+                if mode == "safed" and not resuming:
                     send(ResumeCommand())
                     resumes += 1
                     note("resume", f"with the resent goto ({resumes} of {params.max_resumes})")
@@ -371,6 +402,10 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         goto_sent_s=goto_sent,
         path=path,
         replans=replans,
+        resends=resends,
+        resume_seq=resume_seq,
+        resume_sent_s=resume_sent,
+        resume_resends=resume_resends,
         resumes=resumes,
         safe_seen=s_seen,
         tel_seq=tel_seq,

@@ -107,6 +107,7 @@ def operator_params(scenario: Scenario) -> OperatorParams:
         replan_deviation_m=g.replan_deviation_m,
         max_extrapolation_s=g.max_extrapolation_s,
         ack_timeout_s=g.ack_timeout_s,
+        max_resends=g.max_resends,
     )
 
 

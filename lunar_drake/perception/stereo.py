@@ -12,9 +12,10 @@ disparity, validity and a point cloud in the left camera frame. Pure (numpy + Op
 4. **Validity**: OpenCV's own invalid marks, left-right consistency
    (``disp12_max_diff``), uniqueness and speckle filtering; the frame border
    ``num_disparities`` wide on the left, where the right image has no match, is invalid.
-5. **Depth** ``Z = f B / d`` (m, along the optical axis) and points
-   ``(X, Y, Z) = ((u - cx) Z / f, (v - cy) Z / f, Z)`` in the rectified left frame
-   (x right, y down, z forward).
+5. **Depth** and points through the rectification's ``Q``: ``(X, Y, Z, W) = Q (u, v,
+   d, 1)``; for the ideal rig ``Z = f B / d`` (m, along the optical axis) and ``(X, Y)
+   = ((u - cx) Z / f, (v - cy) Z / f)``, in the rectified left frame (x right, y down,
+   z forward).
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
@@ -131,7 +132,7 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
         )
     l8, r8 = to_8bit(L, Rr, low_percentile=config.low_percentile,
                      high_percentile=config.high_percentile)  # fmt: skip
-    (m1x, m1y), (m2x, m2y), _ = calib.rectification()
+    (m1x, m1y), (m2x, m2y), Q = calib.rectification()
     l8 = cv2.remap(l8, m1x, m1y, cv2.INTER_LINEAR)
     r8 = cv2.remap(r8, m2x, m2y, cv2.INTER_LINEAR)
     n = num_disparities_for(calib, config.min_depth_m)
@@ -149,12 +150,16 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
     valid = raw > 0
     valid[:, :n] = False  # no match possible at the left border
     disp = np.where(valid, disp, np.nan).astype(np.float32)
-    f = calib.focal_px
-    cx, cy = calib.K_left[0, 2], calib.K_left[1, 2]
+    # Through the rectification's Q (the rectified camera, whatever the rig):
+    # [X Y Z W] = Q [u v d 1], points (X, Y, Z) / W.
+    v, u = np.mgrid[0 : calib.height, 0 : calib.width].astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        Z = (f * calib.baseline_m / disp).astype(np.float32)
-    v, u = np.mgrid[0 : calib.height, 0 : calib.width].astype(np.float32)
-    pts = np.stack([(u - cx) * Z / f, (v - cy) * Z / f, Z], axis=-1).astype(np.float32)
+        w = Q[3, 2] * disp + Q[3, 3]
+        pts = np.stack(
+            [(u + Q[0, 3]) / w, (v + Q[1, 3]) / w, np.broadcast_to(Q[2, 3], disp.shape) / w],
+            axis=-1,
+        ).astype(np.float32)
+    Z = pts[..., 2]
     return StereoResult(disparity=disp, valid=valid, depth_m=Z, points=pts, num_disparities=n)
 
 

@@ -7,8 +7,9 @@ initial guess (the downlinked on-board estimate's motion). Quality: the **fitnes
 (fraction of source points with a correspondence), the **inlier RMSE** and the
 **conditioning** of the 6 x 6 point-to-plane information matrix of the alignment
 (:func:`point_to_plane_information`: ``sum J^T J`` with ``J = [(p x n)^T, n^T]`` over
-the correspondences; infinite when the geometry leaves a motion unconstrained -- a flat
-plane cannot fix a slide along it nor a turn about its normal; Open3D's own
+the correspondences, rotations about their centroid in units of their RMS radius;
+infinite when the geometry leaves a motion unconstrained -- a flat plane cannot fix a
+slide along it nor a turn about its normal; Open3D's own
 ``get_information_matrix_from_point_clouds`` is point-to-point and would not see it).
 An alignment is rejected when one of them is out of bounds or when it moved the guess
 further than ``max_correction_m`` / ``max_correction_deg`` (ICP caught in a wrong
@@ -52,7 +53,7 @@ class VoConfig:
     normal_radius_m: float = 0.15
     min_fitness: float = 0.3
     max_rmse_m: float = 0.05
-    max_condition: float = 1.0e4
+    max_condition: float = 1.0e3
     max_correction_m: float = 1.0
     max_correction_deg: float = 10.0
 
@@ -99,10 +100,14 @@ def _cloud(points, voxel_m: float):
     return pc.voxel_down_sample(voxel_m) if voxel_m > 0 else pc
 
 
-def point_to_plane_information(points, target_points, target_normals, max_dist_m: float):
+def point_to_plane_information(points, target_points, target_normals, max_dist_m: float,
+                               *, normalized: bool = False):  # fmt: skip
     """The 6 x 6 information matrix ``sum J^T J`` of a point-to-plane alignment, with
     ``J = [(p x n)^T, n^T]`` (rotation first) for each of ``points`` (N, 3) whose
-    nearest target point lies within ``max_dist_m``, ``n`` that point's normal."""
+    nearest target point lies within ``max_dist_m``, ``n`` that point's normal.
+    ``normalized``: rotations about the matched points' centroid, in units of their RMS
+    radius about it (so the conditioning compares metres with metres and does not grow
+    with the range of the cloud)."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, np.float64)
@@ -111,7 +116,11 @@ def point_to_plane_information(points, target_points, target_normals, max_dist_m
     if not ok.any():
         return np.zeros((6, 6))
     n = np.asarray(target_normals, np.float64)[k[ok]]
-    J = np.hstack([np.cross(p[ok], n), n])
+    q = p[ok]
+    if normalized:
+        q = q - q.mean(axis=0)
+        q = q / max(float(np.sqrt(np.mean(np.sum(q * q, axis=1)))), 1e-9)
+    J = np.hstack([np.cross(q, n), n])
     return J.T @ J
 
 
@@ -147,7 +156,11 @@ def align(prev_points, curr_points, *, init_T=None, config: VoConfig | None = No
     T = np.asarray(result.transformation)
     moved = np.asarray(src.points) @ T[:3, :3].T + T[:3, 3]
     info = point_to_plane_information(
-        moved, np.asarray(tgt.points), np.asarray(tgt.normals), cfg.max_correspondence_m
+        moved,
+        np.asarray(tgt.points),
+        np.asarray(tgt.normals),
+        cfg.max_correspondence_m,
+        normalized=True,
     )
     ev = np.linalg.eigvalsh(info)
     cond = float(ev[-1] / ev[0]) if ev[0] > 1e-12 * max(ev[-1], 1e-300) else math.inf

@@ -133,12 +133,14 @@ class GroundOperator(LeafSystem):
         try:
             return self.GetMyContextFromRoot(context)
         except RuntimeError:
+            self.ValidateContext(context)  # this system's own context, or an error
             return context
 
     def _request(self, context, request: Request) -> None:
         try:
             own = self.GetMyMutableContextFromRoot(context)
         except RuntimeError:
+            self.ValidateContext(context)
             own = context
         st, k, reqs = own.get_abstract_state(self._state).get_value()
         own.get_mutable_abstract_state(self._state).set_value((st, k, (*reqs, request)))

@@ -39,6 +39,7 @@ class ImagePacketizer(LeafSystem):
         super().__init__()
         config.validate()
         self._config = config
+        self._period = float(period_s)
         self.frame_index_input = self.DeclareVectorInputPort("frame_index", 1)
         blank = AbstractValue.Make(np.zeros((1, 1), np.uint16))
         self.left_input = self.DeclareAbstractInputPort("left.raw", blank)
@@ -63,7 +64,7 @@ class ImagePacketizer(LeafSystem):
         if k % self._config.every_n_frames == 0:
             frame = StereoFrame(
                 frame_index=k,
-                t_capture_s=context.get_time(),
+                t_capture_s=k * self._period,
                 codec=self._config.codec,
                 left=encode_frame(self.left_input.Eval(context), config=self._config),
                 right=encode_frame(self.right_input.Eval(context), config=self._config),

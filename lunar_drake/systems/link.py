@@ -125,7 +125,9 @@ class Link(LeafSystem):
         return core.records(self.link_state(context), context.get_time(), direction=self._direction)
 
     def _poll(self, context, state, period):
-        s = self.link_state(context)
+        # From `state`, not the context: polls of other topics due at the same instant
+        # have already written theirs there.
+        s = state.get_abstract_state(self._state).get_value()
         port = self.earth_visible_input
         visible = not port.HasValue(context) or port.Eval(context)[0] > 0.5
         for topic, p in self._topics.items():
