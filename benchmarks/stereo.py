@@ -89,6 +89,7 @@ def main(argv=None) -> int:
     for s in (base, night):
         s.sensors.camera.width, s.sensors.camera.height = a.width, a.height
         s.sensors.camera.rate_hz = 1.0
+        s.sensors.camera.validate()  # --width / --height: one-line errors naming them
     night.rover.lights = []
     site = load_site(base, progress=True)
     config = StereoConfig()
@@ -186,4 +187,10 @@ def _write_images(out: Path, stem: str, preview, res, depth) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from lunar_drake.errors import LunarDrakeError
+
+    try:
+        sys.exit(main())
+    except LunarDrakeError as exc:
+        print(f"stereo.py: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        sys.exit(2)

@@ -84,7 +84,8 @@ def test_mission_drives_to_the_goal_through_the_link(cache):
 @pytest.mark.parametrize(
     ("goal", "match"),
     [("{x_m: 80.0, y_m: 0.0}", r"ground.goals\[0\]: goal .* off the map"),
-     ("{x_m: 8.0, y_m: 6.0}", r"ground.goals\[0\]: goal .* inside a hazard")],
+     ("{x_m: 8.0, y_m: 6.0}", r"ground.goals\[0\]: goal .* inside a hazard"),
+     (None, r"ground.actions\[0\]: goal \(500.00, 0.00\) m is off the ground's map")],
 )  # fmt: skip
 def test_bad_goals_are_one_line_errors_and_write_nothing(cache, tmp_path, capsys, goal, match):
     import re
@@ -93,7 +94,11 @@ def test_bad_goals_are_one_line_errors_and_write_nothing(cache, tmp_path, capsys
 
     out = tmp_path / "run"
     args = ["run", "--scenario", "goto", "--no-meshcat", "--no-progress", "--out", str(out)]
-    assert main([*args, "--scenario-text", f"{{ground: {{goals: [{goal}]}}}}"]) == 2
+    text = (
+        f"{{ground: {{goals: [{goal}]}}}}" if goal
+        else "{ground: {actions: [{t_s: 5, action: goal, x_m: 500, y_m: 0}]}}"
+    )  # fmt: skip
+    assert main([*args, "--scenario-text", text]) == 2
     err = capsys.readouterr().err
     assert re.search(match, err) and len(err.splitlines()) == 1 and "Traceback" not in err
     assert not out.exists()

@@ -479,3 +479,18 @@ def test_a_safed_rover_with_no_resumes_left_is_left_to_the_operator():
     kinds = [e.kind for e in g.state.events.items()]
     assert kinds.count("no_ack") == 1 and kinds.count("left_safed") == 1
     assert [e.detail for e in g.state.events.items() if e.kind == "safed"] == ["uplink_loss"]
+
+
+def test_the_ground_settings_come_from_the_scenario_field_by_field():
+    """Every OperatorParams field is the GroundConfig field of that name (OneOfEverything
+    sets each to a non-default value, so a field dropped on the way would show)."""
+    import dataclasses as dc
+
+    from lunar_drake.diagrams.ground import operator_params
+    from lunar_drake.scenario_files import load_scenario
+
+    s = load_scenario(scenario_name="OneOfEverything")
+    got = operator_params(s)
+    for f in dc.fields(OperatorParams):
+        assert getattr(got, f.name) == getattr(s.ground, f.name), f.name
+        assert getattr(got, f.name) != f.default, f.name

@@ -65,6 +65,12 @@ def test_calibration_matches_the_camera_model_and_round_trips(calib, tmp_path):
     assert X[2] / X[3] == pytest.approx(calib.focal_px * calib.baseline_m / 10.0)
     with pytest.raises(ConfigError, match="does not exist"):
         StereoCalibration.read(tmp_path / "nope.yaml")
+    (tmp_path / "garbage.yaml").write_text("garbage: [\n")
+    with pytest.raises(ConfigError, match="is not OpenCV YAML"):
+        StereoCalibration.read(tmp_path / "garbage.yaml")
+    (tmp_path / "other.yaml").write_text("%YAML:1.0\n---\na: 1\n")
+    with pytest.raises(ConfigError, match="has no 'K1'"):
+        StereoCalibration.read(tmp_path / "other.yaml")
 
 
 def test_sgbm_recovers_a_plane_and_its_depth(calib):

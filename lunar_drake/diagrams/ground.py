@@ -11,6 +11,7 @@ of the rover's pose from telemetry, x, y, z, roll, pitch, yaw).
 
 from __future__ import annotations
 
+import dataclasses as dc
 import math
 
 from pydrake.systems.framework import DiagramBuilder
@@ -19,6 +20,7 @@ from lunar_drake.autonomy.commands import DriveCommand, GotoCommand
 from lunar_drake.autonomy.operations import OperatorParams, Request
 from lunar_drake.autonomy.planner import PlanningError
 from lunar_drake.diagrams.flight import sends_images
+from lunar_drake.errors import OutOfBoundsError
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.ground_operator import GroundOperator, plan_waypoints
 from lunar_drake.systems.image_downlink import ImageReceiver
@@ -43,7 +45,6 @@ def goal_commands(scenario: Scenario, site, *, costmap=None) -> list[GotoCommand
     ground sends when the estimate is perfect). Raises OutOfBoundsError / PlanningError
     naming the goal for a goal off the map, inside a hazard or unreachable."""
     from lunar_drake.autonomy.planner import plan_path
-    from lunar_drake.errors import OutOfBoundsError
 
     g = scenario.ground
     cm = ground_costmap(scenario, site) if costmap is None else costmap
@@ -94,21 +95,10 @@ def ground_costmap(scenario: Scenario, site):
 
 
 def operator_params(scenario: Scenario) -> OperatorParams:
-    """The ground's settings from ``scenario.ground``."""
+    """The ground's settings: each OperatorParams field from the ``scenario.ground``
+    field of the same name (one source of truth, documented on GroundConfig)."""
     g = scenario.ground
-    return OperatorParams(
-        drive_speed_mps=g.drive_speed_mps,
-        goto_tolerance_m=g.goto_tolerance_m,
-        goal_tolerance_m=g.goal_tolerance_m,
-        heartbeat_s=g.heartbeat_s,
-        auto_resume=g.auto_resume,
-        max_resumes=g.max_resumes,
-        max_replans=g.max_replans,
-        replan_deviation_m=g.replan_deviation_m,
-        max_extrapolation_s=g.max_extrapolation_s,
-        ack_timeout_s=g.ack_timeout_s,
-        max_resends=g.max_resends,
-    )
+    return OperatorParams(**{f.name: getattr(g, f.name) for f in dc.fields(OperatorParams)})
 
 
 def scheduled_requests(scenario: Scenario) -> list:
@@ -157,6 +147,14 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
         raise ValueError("ground.goals need the site (the ground's a-priori map)")
     if g.goals:
         goal_commands(scenario, site, costmap=costmap)  # refuse what the map cannot serve
+    for k, a in enumerate(g.actions):
+        if a.action == "goal" and not in_map(a.x_m, a.y_m):
+            x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
+            rows, cols = costmap.shape
+            raise OutOfBoundsError(
+                f"ground.actions[{k}]: goal ({a.x_m:.2f}, {a.y_m:.2f}) m is off the ground's "
+                f"map: x in [{x0:g}, {x0 + cols * res:g}], y in [{y1 - rows * res:g}, {y1:g}] m"
+            )
 
     def no_map(start_xy, goal_xy):
         raise PlanningError("the ground has no map (MakeGroundDiagram without a site)")

@@ -93,7 +93,11 @@ class StereoCalibration:
         p = Path(path)
         if not p.is_file():
             raise ConfigError(f"calibration file {str(p)!r} does not exist")
-        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+        try:
+            fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+        except (cv2.error, SystemError) as exc:
+            msg = " ".join(str(exc).split())[:120]
+            raise ConfigError(f"calibration file {str(p)!r} is not OpenCV YAML: {msg}") from None
         try:
 
             def mat(name):
