@@ -7,7 +7,9 @@
 
 N goals are drawn (seeded) 30-60 m from the scenario's spawn point, each free and
 reachable on the *true* costmap (the site DEM with rocks). Each goal is its own mission
-(the scenario with ``ground.goals: [goal]``, the ground's map ``--map``, cameras off,
+(the scenario with ``ground.goals: [goal]``, the ground's map ``--map``, cameras off;
+with ``--stereo`` the cameras on, frames sent down and the ground's stereo perception
+mapping hazards into its costmap and replanning,
 time for three times the straight-line distance at the drive speed plus two minutes),
 written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
 mean_drift_pct, rtt_s, map`` and ``runs`` (``goal_xy, reached, strikes, final_error_m,
@@ -63,7 +65,8 @@ def sample_goals(*, scenario, site, n: int, seed: int, r_min=30.0, r_max=60.0) -
     return goals
 
 
-def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str = "{}") -> dict:
+def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str = "{}",
+             stereo: bool = False) -> dict:  # fmt: skip
     """One mission to ``goal``; its run directory and scored row."""
     from lunar_drake import metrics, outputs
     from lunar_drake.errors import LunarDrakeError
@@ -74,7 +77,9 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str 
 
     s = load_scenario(scenario_name=scenario_name, scenario_text=text)
     s = copy.deepcopy(s)
-    s.sensors.camera.enabled = False
+    s.sensors.camera.enabled = stereo
+    s.flight.images.enabled = stereo
+    s.ground.perception.enabled = stereo
     s.ground.goals = [Goal(x_m=goal[0], y_m=goal[1])]
     s.ground.map.source = map_source
     dist = math.hypot(goal[0] - s.rover.spawn_x_m, goal[1] - s.rover.spawn_y_m)
@@ -118,6 +123,8 @@ def main(argv=None) -> int:
     p.add_argument("--goals", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--stereo", action="store_true",
+                   help="cameras on: stereo hazards from the downlinked frames")  # fmt: skip
     p.add_argument("--runs", required=True, help="directory for the run directories")
     p.add_argument("--out", default=None, help="write results as JSON here")
     a = p.parse_args(argv)
@@ -133,7 +140,7 @@ def main(argv=None) -> int:
     runs = Path(a.runs)
     runs.mkdir(parents=True, exist_ok=True)
     jobs = [
-        (a.scenario, gl, a.map, str(runs / f"goal_{k:02d}"), a.scenario_text)
+        (a.scenario, gl, a.map, str(runs / f"goal_{k:02d}"), a.scenario_text, a.stereo)
         for k, gl in enumerate(goals)
     ]
     if a.workers > 1:
@@ -160,6 +167,7 @@ def main(argv=None) -> int:
         "rtt_s": float(np.mean(rtts)) if rtts else None,
         "safings": sum(r.get("safings", 0) for r in rows),
         "map": a.map,
+        "stereo": a.stereo,
         "scenario": a.scenario,
         "scenario_text": a.scenario_text,
         "runs": rows,

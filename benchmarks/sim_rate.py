@@ -27,6 +27,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--out", default=None)
     p.add_argument("--rtf-key", default="median_rtf", help="JSON key of the median rtf")
+    p.add_argument("--scenario-text", default="{sensors: {camera: {enabled: false}}}",
+                   help="YAML overrides (default: cameras off)")  # fmt: skip
     args = p.parse_args(argv)
     if args.out:
         check_output_file(args.out, what="results JSON")
@@ -37,9 +39,7 @@ def main(argv=None) -> int:
     from lunar_drake.scenario_files import load_scenario
     from lunar_drake.site import load_site
 
-    scenario = load_scenario(
-        scenario_name=args.scenario, scenario_text="{sensors: {camera: {enabled: false}}}"
-    )
+    scenario = load_scenario(scenario_name=args.scenario, scenario_text=args.scenario_text)
     site = load_site(scenario, progress=False)
     diagram = MakeMissionDiagram(scenario=scenario, site=site)
     runs = []
@@ -52,17 +52,22 @@ def main(argv=None) -> int:
         wall = time.perf_counter() - t0
         ctx = diagram.GetMyContextFromRoot(sim.get_context())
         pose = diagram.GetOutputPort("truth.pose").Eval(ctx)
-        runs.append(
-            {
-                "wall_s": wall,
-                "rtf": args.sim_s / wall,
-                "final_xy_m": [float(pose[0]), float(pose[1])],
-            }
-        )
+        run = {"wall_s": wall, "rtf": args.sim_s / wall,
+               "final_xy_m": [float(pose[0]), float(pose[1])]}  # fmt: skip
+        ground = diagram.GetSubsystemByName("ground")
+        if ground.HasSubsystemNamed("ground.perception"):
+            gp = ground.GetSubsystemByName("ground.perception")
+            recs = gp.perception_state(sim.get_context()).records.items()
+            rx = ground.GetSubsystemByName("ground.images")
+            run["frames_received"] = len(rx.received(rx.GetMyContextFromRoot(sim.get_context())))
+            run["keyframes"] = len(recs)
+            run["vo_accepted"] = sum(r.vo == "accepted" for r in recs)
+        runs.append(run)
     med = statistics.median(r["rtf"] for r in runs)
     result = {
         "benchmark": "sim_rate",
         "scenario": args.scenario,
+        "scenario_text": args.scenario_text,
         "sim_s": args.sim_s,
         "plant_time_step_s": scenario.plant_config.time_step,
         "cpu_count": os.cpu_count(),

@@ -153,8 +153,8 @@ def _vo(scen, site, yaw, step, calib, config, res0, X_WC0) -> dict:
     res1 = match(left, right, calib=calib, config=config)
 
     def near(r):
-        c = r.cloud()
-        return c[c[:, 2] <= 10.0]
+        c, g = r.cloud(), r.cloud_intensity()
+        return c[c[:, 2] <= 10.0], g[c[:, 2] <= 10.0]
 
     T_true = np.linalg.inv(X_WC0) @ X_WC1
     guess = T_true.copy()
@@ -162,7 +162,8 @@ def _vo(scen, site, yaw, step, calib, config, res0, X_WC0) -> dict:
     guess[:3, :3] = guess[:3, :3] @ np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]])
     guess[:3, 3] += [0.05, 0.0, 0.0]
     t0 = time.perf_counter()
-    al = align(near(res0), near(res1), init_T=guess)
+    (p0, g0), (p1, g1) = near(res0), near(res1)
+    al = align(p0, p1, init_T=guess, prev_intensity=g0, curr_intensity=g1)
     dt, dr = correction(T_true, al.T_prev_curr)
     g_dt, g_dr = correction(T_true, guess)
     return {"step_m": step, "vo_error_m": dt, "vo_error_deg": dr, "guess_error_m": g_dt,

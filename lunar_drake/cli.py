@@ -6,6 +6,7 @@ lunar-drake run [--scenario NAME|FILE[:NAME]|RUN/scenario.yaml] [--scenario-text
 lunar-drake terrain synth --size N --resolution M --seed S --out DIR [...]
 lunar-drake scenarios [FILE]
 lunar-drake slip-fit DATA.csv --rover {skid,explicit} --out DIR [--base-soil NAME|FILE]
+lunar-drake vo-study --angles A:B:STEP --seeds N [--lights] [--straight DIST_M] --out DIR
 """
 
 from __future__ import annotations
@@ -333,6 +334,41 @@ def _cmd_slip_study(args) -> int:
     return 0
 
 
+def _cmd_vo_study(args) -> int:
+    from lunar_drake.studies.vo_study import VoStudyConfig, parse_angles, run_vo_study
+
+    config = VoStudyConfig(
+        scenario_name=args.scenario,
+        angles_deg=parse_angles(args.angles) if args.straight is None else (),
+        seeds=args.seeds,
+        straight_m=args.straight,
+        lights=args.lights,
+        width=args.width,
+        height=args.height,
+        turn_rate_dps=args.turn_rate,
+        keyframe_m=args.keyframe,
+    )
+    out = run_vo_study(config=config, out_dir=args.out, progress=not args.no_progress)
+    if args.straight is not None:
+        print(f"{'distance m':>10} {'VO error m':>11} {'odom error m':>13} {'VO %':>6} "
+              f"{'odom %':>7} {'rejected':>9}")  # fmt: skip
+        for r in out["runs"]:
+            print(f"{r['distance_m']:10.2f} {r['vo_error_m']:11.3f} {r['odom_error_m']:13.3f} "
+                  f"{100 * r['vo_error_m'] / r['distance_m']:6.2f} "
+                  f"{100 * r['odom_error_m'] / r['distance_m']:7.2f} "
+                  f"{r['rejected']:>4}/{r['links']:<4}")  # fmt: skip
+        print(f"Outputs: {Path(args.out).resolve()} (straight.json, params.json)")
+        return 0
+    print(f"{'angle':>6} {'runs':>5} {'VO cm':>8} {'VO acc. cm':>11} {'odom cm':>8} "
+          f"{'rejected':>9} {'bad':>4} {'bad kept':>9}")  # fmt: skip
+    for r in out["summary"]:
+        print(f"{r['angle_deg']:6.1f} {r['runs']:5d} {100 * r['vo_error_m']:8.2f} "
+              f"{100 * r['vo_accepted_error_m']:11.2f} {100 * r['odom_error_m']:8.2f} "
+              f"{r['rejected']:9d} {r['bad']:4d} {r['bad_accepted']:9d}")  # fmt: skip
+    print(f"Outputs: {Path(args.out).resolve()} (vo.csv, vo.png, params.json)")
+    return 0
+
+
 def _cmd_slip_fit(args) -> int:
     from lunar_drake.studies.slip_fit import describe, run_slip_fit
 
@@ -424,6 +460,25 @@ def build_parser() -> argparse.ArgumentParser:
     ss.add_argument("--out", required=True)
     ss.add_argument("--no-progress", action="store_true")
     ss.set_defaults(func=_cmd_slip_study)
+
+    vs = sub.add_parser(
+        "vo-study", help="stereo ICP visual odometry vs fused odometry (paper Fig. 21)"
+    )
+    vs.add_argument("--scenario", default="default", help="the scenario's site, rover, sensors")
+    vs.add_argument("--angles", default="0:60:10", help="A:B:STEP in degrees, or a comma list")
+    vs.add_argument("--seeds", type=_positive_int, default=3)
+    vs.add_argument("--straight", type=_positive_float, default=None, metavar="DIST_M",
+                    help="drive straight this far instead (writes straight.json)")  # fmt: skip
+    vs.add_argument("--lights", action="store_true",
+                    help="in shadow, with the night scenario's headlights")  # fmt: skip
+    vs.add_argument("--width", type=_positive_int, default=1024)
+    vs.add_argument("--height", type=_positive_int, default=768)
+    vs.add_argument("--turn-rate", type=_positive_float, default=5.0, help="deg/s of the turns")
+    vs.add_argument("--keyframe", type=_positive_float, default=1.0,
+                    help="VO keyframe spacing on the straight drive (m)")  # fmt: skip
+    vs.add_argument("--out", required=True)
+    vs.add_argument("--no-progress", action="store_true")
+    vs.set_defaults(func=_cmd_vo_study)
 
     sf = sub.add_parser(
         "slip-fit", help="fit soil phi and K to measured slip vs slope (Wong-Reece reference)"

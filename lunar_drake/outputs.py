@@ -6,7 +6,8 @@ A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake ru
 ``telemetry.csv`` (what the ground received), ``link.csv`` (every message over the
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
-the ground received, compressed), ``calibration.yaml`` (the stereo rig, OpenCV style;
+the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
+mapping keyframes; with ground perception), ``calibration.yaml`` (the stereo rig, OpenCV style;
 with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
 The CLI builds it in a temporary sibling directory and swaps it in when complete
@@ -15,6 +16,7 @@ The CLI builds it in a temporary sibling directory and swaps it in when complete
 
 from __future__ import annotations
 
+import dataclasses as dc
 import json
 import math
 from pathlib import Path
@@ -56,6 +58,7 @@ RUN_DIR_NAMES = frozenset(
         "modes.csv",
         "ground_events.csv",
         "images.csv",
+        "keyframes.csv",
         "calibration.yaml",
         "frames",
         "meshcat.html",
@@ -159,6 +162,16 @@ def write_run(
     write_csv(out / "images.csv", ["t_received_s", "t_sent_s", "frame_index", "codec", "bytes"],
               rows)  # fmt: skip
     paths.append(out / "images.csv")
+    if logs.keyframes:
+        from lunar_drake.perception.ground_pipeline import KeyframeRecord
+
+        names = [f.name for f in dc.fields(KeyframeRecord)]
+        rows = (
+            [_quote(v) if isinstance(v, str) else _fmt(v) for v in dc.astuple(r)]
+            for r in logs.keyframes
+        )
+        write_csv(out / "keyframes.csv", names, rows)
+        paths.append(out / "keyframes.csv")
     if scenario.sensors.camera.enabled:
         from lunar_drake.perception.calibration import StereoCalibration
 

@@ -38,6 +38,7 @@ from lunar_drake.comms.link import ChannelConfig, LinkConfig
 from lunar_drake.dynamics.terramechanics import SoilParams
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.models.rover_description import RoverDescription, krex2_rp
+from lunar_drake.perception.ground_pipeline import PerceptionConfig
 from lunar_drake.render.camera import CameraConfig
 from lunar_drake.sensors.imu import ImuConfig
 from lunar_drake.sensors.star_tracker import StarTrackerConfig
@@ -309,6 +310,9 @@ class GroundConfig:
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
             (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
+        perception: stereo, visual odometry and mapping on the downlinked frames
+            (:class:`~lunar_drake.perception.ground_pipeline.PerceptionConfig`; runs
+            when frames come down: cameras on and ``flight.images.enabled``).
     """
 
     rate_hz: float = 10.0
@@ -328,6 +332,7 @@ class GroundConfig:
     max_resends: int = 5
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
+    perception: PerceptionConfig = dc.field(default_factory=PerceptionConfig)
 
 
 @dc.dataclass
@@ -511,6 +516,7 @@ def validate_scenario(s: Scenario) -> None:
         )
     _section("ground.map", s.ground.map.validate)
     _section("ground.hazards", s.ground.hazards.validate)
+    _section("ground.perception", s.ground.perception.validate)
     _section("comms.uplink", s.comms.uplink.validate)
     _section("comms.downlink", s.comms.downlink.validate)
     _section("comms.line_of_sight", s.comms.line_of_sight.validate)

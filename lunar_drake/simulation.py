@@ -103,6 +103,10 @@ class SimulationLogs:
             ground (:data:`~lunar_drake.autonomy.operations.GOAL_STATUS`).
         images_received: the stereo frames the ground received, (t_received_s,
             t_sent_s, frame_index, codec, bytes) each.
+        keyframes: the ground perception's processed keyframes
+            (:class:`~lunar_drake.perception.ground_pipeline.KeyframeRecord`).
+        ground_costmap: the ground's final costmap (a-priori + stereo hazards), or None
+            without ground perception.
         frames_written: camera frames written to ``frames_dir``.
         wall: wall-clock timing (s; not deterministic).
     """
@@ -119,6 +123,8 @@ class SimulationLogs:
     ground_events: list = dc.field(default_factory=list)
     ground_goals: list = dc.field(default_factory=list)
     images_received: list = dc.field(default_factory=list)
+    keyframes: list = dc.field(default_factory=list)
+    ground_costmap: object = None
 
 
 StopCheck = Callable[[float, np.ndarray], "str | None"]
@@ -298,6 +304,11 @@ def simulate(
              d.message.payload.codec, d.message.size_bytes)
             for d in rx.received(rx.GetMyContextFromRoot(root))
         ]  # fmt: skip
+    keyframes, costmap = [], None
+    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.perception"):
+        gp = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.perception")
+        pst = gp.perception_state(root)
+        keyframes, costmap = pst.records.items(), pst.costmap
     return SimulationLogs(
         simulated_s=simulated,
         stop_reason=stop_reason[0],
@@ -310,6 +321,8 @@ def simulate(
         ground_events=ops.events.items(),
         ground_goals=[(g, st) for g, st in zip(ops.goals, ops.status, strict=True)],
         images_received=images,
+        keyframes=keyframes,
+        ground_costmap=costmap,
         wall={
             "build_s": t_built - t0,
             "simulate_s": t_sim - t_built,

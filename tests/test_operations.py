@@ -230,11 +230,11 @@ class Ground:
         self.inbox += (Delivery(Message("telemetry", self.tel_seq, t, packet, 0), t),)
         self.tel_seq += 1
 
-    def tick(self, t, *requests, heartbeats=False):
+    def tick(self, t, *requests, heartbeats=False, **kw):
         """The commands sent at ``t`` (heartbeats left out unless asked for)."""
         self.state = operator_step(self.state, self.inbox, now=t, params=self.params,
                                    planner=self.planner, start_pose=(0.0, 0.0, 0.0),
-                                   requests=requests)  # fmt: skip
+                                   requests=requests, **kw)  # fmt: skip
         self.sent += [(t, m.seq, m.payload) for m in self.state.outbox]
         out = [m.payload for m in self.state.outbox]
         return out if heartbeats else [c for c in out if not isinstance(c, Heartbeat)]
@@ -347,6 +347,52 @@ def test_stop_pauses_goals_resume_replans_and_deviation_replans():
     arc, mast = out
     assert arc == DriveCommand(duration_s=4.0, vx_mps=-0.1, wz_radps=-0.05)
     assert mast == MastCommand(pan_rad=0.3, tilt_rad=0.1)
+
+
+def test_a_new_hazard_on_the_path_stops_and_replans_once_per_map_version():
+    g = Ground(params=OperatorParams(max_replans=1, heartbeat_s=5.0))
+    g.tick(0.0, Request("goal", (20.0, 0.0)))
+    g.telemetry(5.0, xy=(3.0, 0.0), mode="driving", motion_seq=g.goto_seq(), brake=0,
+                twist=(0.2, 0.0, 0.0))  # fmt: skip
+    checked = []
+
+    def blocked(path, xy):
+        checked.append(tuple(xy))
+        return True
+
+    assert g.tick(5.1, map_version=0, blocked=blocked) == []  # the version it started with
+    assert checked == []
+    out = g.tick(5.2, map_version=1, blocked=blocked)
+    assert isinstance(out[0], StopCommand)
+    assert out[1].waypoints[0] == pytest.approx((3.04, 0.0))  # carried 0.2 s at 0.2 m/s
+    assert g.state.replans == 0  # not counted against max_replans
+    assert "a new hazard" in g.state.events.items()[-1].detail
+    # Same version again: not checked; a new version whose hazard is off the path: no replan.
+    g.telemetry(6.0, xy=(3.1, 0.0), mode="driving", motion_seq=g.goto_seq(), brake=0,
+                twist=(0.2, 0.0, 0.0))  # fmt: skip
+    assert g.tick(6.1, map_version=1, blocked=blocked) == [] and len(checked) == 1
+    assert g.tick(6.2, map_version=2, blocked=lambda path, xy: False) == []
+
+
+def test_the_pose_correction_moves_the_estimate_the_ground_plans_from():
+    g = Ground()
+    g.telemetry(1.0, xy=(2.0, 1.0), mode="idle")
+    (goto,) = g.tick(1.1, Request("goal", (10.0, 0.0)), correction=(0.5, -0.25, 0.0))
+    assert goto.waypoints[0] == pytest.approx((2.5, 0.75))
+
+
+def test_the_command_preview_of_each_goto_is_kept_with_its_seq():
+    from lunar_drake.autonomy.preview import preview_goto
+
+    g = Ground()
+
+    def preview(pose, wp):
+        return preview_goto(pose=(pose[0], pose[1], pose[5]), waypoints=wp, speed_mps=0.2,
+                            tolerance_m=0.2, rate_hz=10.0)  # fmt: skip
+
+    g.tick(0.0, Request("goal", (5.0, 0.0)), preview=preview)
+    seq, path = g.state.preview
+    assert seq == g.goto_seq() and path[-1, 1] == pytest.approx(5.0, abs=0.2)
 
 
 def test_heartbeats_fill_the_silence():

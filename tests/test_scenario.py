@@ -22,6 +22,8 @@ from lunar_drake.scenario_files import (
 KEPT_AT_DEFAULT = {
     "ground.route[*].vy_mps": "its rover is skid-steer (steering is non-default), which "
     "cannot move sideways",
+    "ground.perception.map.focal_px": "ground.perception takes it from the rig's calibration",
+    "ground.perception.map.baseline_m": "ground.perception takes it from the rig's calibration",
     "ground.goals": "goals replace the route, which OneOfEverything exercises (the goto "
     "scenario and tests/test_goto.py drive to goals)",
 }

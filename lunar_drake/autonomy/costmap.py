@@ -199,19 +199,42 @@ def build_costmap(
     """The costmap of a DEM ``z`` (m; pixel ``resolution_m``; west edge ``x0_m``, north
     edge ``y1_m``) for ``rover`` (module docstring)."""
     config.validate()
-    baseline = config.baseline_m or rover.wheelbase_m
-    window = config.step_window_m or 2.0 * rover.wheel_radius_m
-    max_step = config.max_step_m or 0.8 * min(rover.wheel_radius_m, rover.ground_clearance_m)
+    baseline, window, max_step = hazard_limits(config, rover)
     slope, step, rough = hazard_layers(
         z, resolution_m=resolution_m, baseline_m=baseline, step_window_m=window
     )
     k = max(1, round(config.resolution_m / resolution_m))
     slope, step, rough = (_block_max(a, k) for a in (slope, step, rough))
-    res = resolution_m * k
     lethal = (slope > config.max_slope_deg) | (step > max_step)
+    return costmap_from_layers(
+        slope_deg=slope, step_m=step, roughness_m=rough, lethal_raw=lethal,
+        resolution_m=resolution_m * k, x0_m=x0_m, y1_m=y1_m, rover=rover, config=config,
+    )  # fmt: skip
+
+
+def hazard_limits(config: HazardConfig, rover: RoverEnvelope) -> tuple:
+    """(baseline_m, step_window_m, max_step_m) of ``config`` with its zero defaults
+    resolved for ``rover`` (see :class:`HazardConfig`)."""
+    baseline = config.baseline_m or rover.wheelbase_m
+    window = config.step_window_m or 2.0 * rover.wheel_radius_m
+    max_step = config.max_step_m or 0.8 * min(rover.wheel_radius_m, rover.ground_clearance_m)
+    return baseline, window, max_step
+
+
+def costmap_from_layers(*, slope_deg, step_m, roughness_m, lethal_raw, resolution_m: float,
+                        x0_m: float, y1_m: float, rover: RoverEnvelope,
+                        config: HazardConfig) -> Costmap:  # fmt: skip
+    """The costmap of hazard layers already on the planning grid (cell ``resolution_m``;
+    west edge ``x0_m``, north edge ``y1_m``): ``lethal_raw`` inflated by the rover's
+    footprint radius plus ``config.inflation_m``, free cells costed from slope and
+    roughness (module docstring). :func:`build_costmap` ends here."""
+    config.validate()
+    slope = np.asarray(slope_deg, np.float64)
+    rough = np.asarray(roughness_m, np.float64)
+    lethal = np.asarray(lethal_raw, bool)
     radius = rover.footprint_radius_m + config.inflation_m
     if lethal.any():
-        dist = ndimage.distance_transform_edt(~lethal) * res
+        dist = ndimage.distance_transform_edt(~lethal) * resolution_m
         inflated = dist <= radius
     else:
         inflated = lethal
@@ -224,12 +247,12 @@ def build_costmap(
     return Costmap(
         cost=cost,
         slope_deg=slope,
-        step_m=step,
+        step_m=np.asarray(step_m, np.float64),
         roughness_m=rough,
         lethal_raw=lethal,
         x0_m=float(x0_m),
         y1_m=float(y1_m),
-        resolution_m=res,
+        resolution_m=float(resolution_m),
     )
 
 
@@ -246,11 +269,10 @@ def orbital_dem(z, *, resolution_m: float, orbital_resolution_m: float, noise_m:
     return coarse + g.normal(0.0, noise_m, coarse.shape), resolution_m * k
 
 
-def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
-                     map_config: MapConfig, seed: int) -> Costmap:  # fmt: skip
-    """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
-    ``heightfield``: the raster window covering them plus ``map_config.margin_m``,
-    as ``map_config.source`` says (truth or orbital)."""
+def map_dem_for_site(*, heightfield, points_xy, map_config: MapConfig, seed: int) -> tuple:
+    """(z, pixel size, x0_m, y1_m): the ground's a-priori DEM around ``points_xy``
+    (start, goals; site m): the raster window covering them plus
+    ``map_config.margin_m``, as ``map_config.source`` says (truth or orbital)."""
     map_config.validate()
     pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
     if not np.isfinite(pts).all():
@@ -276,6 +298,15 @@ def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards:
             z, resolution_m=res, orbital_resolution_m=map_config.orbital_resolution_m,
             noise_m=map_config.orbital_noise_m, seed=seed,
         )  # fmt: skip
+    return z, res, x0, y1
+
+
+def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
+                     map_config: MapConfig, seed: int) -> Costmap:  # fmt: skip
+    """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
+    ``heightfield``: the DEM of :func:`map_dem_for_site`, through :func:`build_costmap`."""
+    z, res, x0, y1 = map_dem_for_site(heightfield=heightfield, points_xy=points_xy,
+                                      map_config=map_config, seed=seed)  # fmt: skip
     return build_costmap(z, resolution_m=res, x0_m=x0, y1_m=y1, rover=rover, config=hazards)
 
 
@@ -287,6 +318,9 @@ __all__ = [
     "RoverEnvelope",
     "build_costmap",
     "costmap_for_site",
+    "costmap_from_layers",
     "hazard_layers",
+    "hazard_limits",
+    "map_dem_for_site",
     "orbital_dem",
 ]

@@ -122,7 +122,10 @@ class OperatorState:
             of the newest safing handled.
         tel_seq, packet, t_sent, t_received: the newest telemetry handled (-1 / None).
         last_sent_s: when a command last went up (s). outbox: this tick's messages.
-        events: a Ledger of :class:`Event`.
+        events: a Ledger of :class:`Event`. map_seen: the map version whose hazards the
+            path was last checked against. preview: (seq, path) of the newest goto sent
+            with a preview: its predicted path ((t, x, y, z) rows;
+            :mod:`~lunar_drake.autonomy.preview`); (-1, None) before.
     """
 
     pending: tuple = ()
@@ -148,6 +151,8 @@ class OperatorState:
     last_sent_s: float = -math.inf
     outbox: tuple = ()
     events: Ledger = dc.field(default_factory=Ledger)
+    map_seen: int = 0
+    preview: tuple = (-1, None)
 
     def __deepcopy__(self, memo):
         return self
@@ -177,6 +182,20 @@ def ground_pose(packet, t_sent: float, now: float, *, max_extrapolation_s: float
     return pose
 
 
+def corrected_pose(pose, correction) -> np.ndarray:
+    """``pose`` (x, y, z, roll, pitch, yaw) moved by a planar ``correction`` (dx, dy,
+    dyaw): ``p' = Rz(dyaw) p + d``, ``yaw' = yaw + dyaw`` (the ground's VO fusion)."""
+    out = np.asarray(pose, np.float64).copy()
+    dx, dy, dyaw = (float(v) for v in correction)
+    if dx == 0.0 and dy == 0.0 and dyaw == 0.0:
+        return out
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    x, y = out[0], out[1]
+    out[0], out[1] = c * x - s * y + dx, s * x + c * y + dy
+    out[5] = (out[5] + dyaw + math.pi) % (2.0 * math.pi) - math.pi
+    return out
+
+
 def distance_to_path(xy, path) -> float:
     """Horizontal distance (m) from ``xy`` to the polyline ``path`` ((x, y), ...)."""
     p = np.asarray(xy, np.float64)[:2]
@@ -196,15 +215,21 @@ def _set(tup: tuple, k: int, v) -> tuple:
 
 
 def operator_step(state: OperatorState, deliveries, *, now: float, params: OperatorParams,
-                  planner, start_pose, requests=()) -> OperatorState:  # fmt: skip
+                  planner, start_pose, requests=(), correction=(0.0, 0.0, 0.0),
+                  map_version: int = 0, blocked=None, preview=None) -> OperatorState:  # fmt: skip
     """One ground tick at ``now`` (s).
 
     ``deliveries``: the downlink telemetry inbox (newest handled once); ``requests``:
     new :class:`Request` s (appended to the pending ones); ``planner(start_xy,
     goal_xy)`` returns waypoints ((x, y), ...) or raises a LunarDrakeError (a goal it
     cannot serve fails); ``start_pose`` (x, y, yaw) is the spawn pose, the estimate
-    before the first telemetry. The returned state's ``outbox`` holds the messages to
-    send now.
+    before the first telemetry. ``correction`` (dx, dy, dyaw) moves the downlinked
+    estimate to the ground's own (:func:`corrected_pose`; VO). ``map_version`` and
+    ``blocked(path, xy)`` (True when the path from xy now crosses a hazard): when the
+    map's version changes while the rover drives a goal, a blocked path is stopped and
+    replanned (not counted against ``max_replans``). ``preview(pose, waypoints)``: the
+    predicted path of a goto about to be sent (kept in the state's ``preview``). The
+    returned state's ``outbox`` holds the messages to send now.
     """
     s = state
     pending = s.pending + tuple(requests)
@@ -219,6 +244,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         pose = np.array([start_pose[0], start_pose[1], 0.0, 0.0, 0.0, start_pose[2]])
     else:
         pose = ground_pose(packet, t_sent, now, max_extrapolation_s=params.max_extrapolation_s)
+    pose = corrected_pose(pose, correction)
     goals, status, active, paused = s.goals, s.status, s.active, s.paused
     goto_seq, path, replans, resumes = s.goto_seq, s.path, s.replans, s.resumes
     goto_sent, resends = s.goto_sent_s, s.resends
@@ -269,8 +295,10 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
     # command): a newer heartbeat alone does not prove it arrived.
     acked = packet is not None and packet[_F["motion_seq"]] >= goto_seq >= 0
 
+    predicted = s.preview
+
     def plan_goto(why):
-        nonlocal goto_seq, goto_sent, path, active, status
+        nonlocal goto_seq, goto_sent, path, active, status, predicted
         goal = goals[active]
         try:
             wp = planner((pose[0], pose[1]), goal)
@@ -287,6 +315,8 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             timeout_s=3.0 * length / params.drive_speed_mps + 60.0,
         )
         goto_seq, goto_sent, path = send(cmd), now, cmd.waypoints
+        if preview is not None:
+            predicted = (goto_seq, preview(pose, cmd.waypoints))
         note("plan", f"{why}: goal {active}, {len(wp)} waypoints, {length:.1f} m")
 
     # A new safing: resume (and replan below).
@@ -336,6 +366,18 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         note("goal_failed", f"{active}: {detail}")
         start_next()
 
+    map_seen = s.map_seen
+
+    def hazard_ahead() -> bool:
+        # Checked once per new map version while the rover drives an acknowledged goto.
+        nonlocal map_seen
+        if not (acked and mode == "driving" and path and blocked is not None):
+            return False
+        if map_version == map_seen:
+            return False
+        map_seen = map_version
+        return bool(blocked(path, pose[:2]))
+
     # Goals.
     if active < 0 and not paused and "pending" in status:
         if mode != "safed":
@@ -381,6 +423,11 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
                     start_next()
             else:
                 give_up(f"{err:.2f} m short after {replans} replans")
+        elif hazard_ahead():
+            send(StopCommand())
+            plan_goto("replan (a new hazard on the path)")
+            if active < 0:
+                start_next()
         elif acked and mode == "driving" and path and replans < params.max_replans:
             off = distance_to_path(pose[:2], path)
             if off > params.replan_deviation_m:
@@ -415,6 +462,8 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         last_sent_s=now if out else s.last_sent_s,
         outbox=tuple(out),
         events=events,
+        map_seen=map_seen,
+        preview=predicted,
     )
 
 
@@ -425,6 +474,7 @@ __all__ = [
     "OperatorParams",
     "OperatorState",
     "Request",
+    "corrected_pose",
     "distance_to_path",
     "ground_pose",
     "operator_step",

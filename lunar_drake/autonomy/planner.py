@@ -120,6 +120,42 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
     return Path(waypoints_xy=wp, cells=cells, cost=float(cum[g]) * res, length_m=length)
 
 
+def path_blocked(*, costmap: Costmap, path_xy, from_xy, free_radius_m: float = 1.0,
+                 lookahead_m: float = 20.0) -> bool:  # fmt: skip
+    """True when the rest of ``path_xy`` ((x, y), ...; site m) from the point nearest
+    ``from_xy`` crosses a lethal cell within ``lookahead_m`` of path, ignoring cells
+    within ``free_radius_m`` of ``from_xy`` (the rover may stand in an inflation)."""
+    w = np.asarray(path_xy, np.float64).reshape(-1, 2)
+    p = np.asarray(from_xy, np.float64)[:2]
+    if len(w) < 2:
+        return False
+    a, b = w[:-1], w[1:]
+    d = b - a
+    L2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
+    t = np.clip(np.sum((p - a) * d, axis=1) / L2, 0.0, 1.0)
+    q = a + t[:, None] * d
+    k = int(np.argmin(np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])))
+    rest = np.vstack([q[k], w[k + 1 :]])
+    seg = np.diff(rest, axis=0)
+    lengths = np.hypot(seg[:, 0], seg[:, 1])
+    step = 0.5 * costmap.resolution_m
+    travelled = 0.0
+    for (x0, y0), (dx, dy), length in zip(rest[:-1], seg, lengths, strict=True):
+        n = max(math.ceil(length / step), 1)
+        s_ = np.linspace(0.0, 1.0, n + 1)
+        xs, ys = x0 + s_ * dx, y0 + s_ * dy
+        along = travelled + s_ * length
+        keep = (along <= lookahead_m) & (np.hypot(xs - p[0], ys - p[1]) > free_radius_m)
+        for x, y in zip(xs[keep], ys[keep], strict=True):
+            r, c = costmap.cell_of(float(x), float(y))
+            if costmap.inside(r, c) and not np.isfinite(costmap.cost[r, c]):
+                return True
+        travelled += length
+        if travelled > lookahead_m:
+            break
+    return False
+
+
 def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> None:
     """Draws the costmap (grey: cost, red: lethal) and the path on a matplotlib axis."""
     rows, cols = costmap.shape
@@ -140,4 +176,4 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     ax.set_aspect("equal")
 
 
-__all__ = ["Path", "PlanningError", "plan_path", "plot_plan"]
+__all__ = ["Path", "PlanningError", "path_blocked", "plan_path", "plot_plan"]

@@ -11,6 +11,7 @@ would really send.
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
 
 import dataclasses as dc
+import math
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from lunar_drake.errors import ConfigError, check_range
 
 CODECS = ("png", "jpeg")
 #: Bytes of a stereo frame's header (frame index, capture time, codec, sizes).
-HEADER_BYTES = 24
+HEADER_BYTES = 24 + 8 * 8  # index, time, codec, sizes; pose and gimbal (8 doubles)
 
 
 @dc.dataclass
@@ -54,13 +55,21 @@ class ImageDownlinkConfig:
 @dc.dataclass(frozen=True, eq=False)
 class StereoFrame:
     """One stereo frame as sent: ``frame_index``, capture time ``t_capture_s`` (s),
-    ``codec`` and the encoded ``left`` and ``right`` images (uint8 arrays of bytes)."""
+    ``codec`` and the encoded ``left`` and ``right`` images (uint8 arrays of bytes);
+    the header also carries the on-board state at capture: ``pose_estimate`` (x, y, z,
+    roll, pitch, yaw; m, rad, site frame; the flight EKF's), ``pan_tilt_rad`` (the
+    gimbal's commanded pan and tilt, rad), NaN when unknown, and ``gimbal_steady_s``:
+    how long that command had held (s; from 0 at start-up, when the gimbal moves
+    from its rest angles), so the ground can skip frames taken while it moved."""
 
     frame_index: int
     t_capture_s: float
     codec: str
     left: np.ndarray
     right: np.ndarray
+    pose_estimate: tuple = (math.nan,) * 6
+    pan_tilt_rad: tuple = (math.nan, math.nan)
+    gimbal_steady_s: float = 0.0
 
     def size_bytes(self) -> int:
         """Encoded size: the header and both images."""

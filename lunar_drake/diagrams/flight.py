@@ -54,6 +54,12 @@ def image_timing(scenario: Scenario) -> tuple[float, float]:
     return period, (cam.delay_s % period) + 1e-6
 
 
+def follower_params(description) -> FollowerParams:
+    """The on-board path follower's settings for a rover: explicit steer crabs back onto
+    the path; skid steer cannot move sideways."""
+    return FollowerParams(crab_gain_per_s=0.0 if description.steering == "skid" else 0.3)
+
+
 def MakeFlightDiagram(*, scenario: Scenario):
     """Builds the flight-software diagram (named ``flight``): the command executor (runs
     the uplinked commands, keeps the mode, safes on a bumper trip or the loss of the
@@ -74,8 +80,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
             rate_hz=f.rate_hz,
             brake_delay_s=f.brake_delay_s,
             uplink_timeout_s=f.safety.uplink_timeout_s,
-            # Explicit steer crabs back onto the path; skid steer cannot move sideways.
-            follower=FollowerParams(crab_gain_per_s=0.0 if d.steering == "skid" else 0.3),
+            follower=follower_params(d),
         ),
     )
     bumper = builder.AddNamedSystem("flight.bumper", VirtualBumper(description=d, config=f.safety))
@@ -132,6 +137,8 @@ def MakeFlightDiagram(*, scenario: Scenario):
         builder.ExportInput(images.frame_index_input, "camera.frame_index")
         builder.ExportInput(images.left_input, "camera.left.raw")
         builder.ExportInput(images.right_input, "camera.right.raw")
+        builder.Connect(odometry.pose_estimate_output, images.pose_input)
+        builder.Connect(gimbal.gimbal_command_output, images.gimbal_input)
         builder.ExportOutput(images.images_output, "downlink.images")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")
     builder.ExportOutput(odometry.pose_estimate_output, "flight.pose_estimate")

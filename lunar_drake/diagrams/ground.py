@@ -23,6 +23,7 @@ from lunar_drake.diagrams.flight import sends_images
 from lunar_drake.errors import OutOfBoundsError
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.ground_operator import GroundOperator, plan_waypoints
+from lunar_drake.systems.ground_perception import GroundPerception
 from lunar_drake.systems.image_downlink import ImageReceiver
 from lunar_drake.systems.telemetry import TelemetryReceiver
 
@@ -69,6 +70,31 @@ def goal_commands(scenario: Scenario, site, *, costmap=None) -> list[GotoCommand
     return out
 
 
+def _map_points(scenario: Scenario, site) -> list:
+    g = scenario.ground
+    hf = site.heightfield
+    if hf.shape[0] * hf.shape[1] <= 4096**2:
+        b = hf.bounds
+        return [(b.left, b.bottom), (b.right, b.top)]
+    points = [(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)]
+    points += [(p.x_m, p.y_m) for p in g.goals]
+    points += [(a.x_m, a.y_m) for a in g.actions if a.action == "goal"]
+    return points
+
+
+def ground_map_dem(scenario: Scenario, site):
+    """The ground's a-priori DEM (:class:`~lunar_drake.perception.elevation_map.PriorDem`)
+    over the area of :func:`ground_costmap` (``ground.map``: truth or orbital)."""
+    from lunar_drake.autonomy.costmap import map_dem_for_site
+    from lunar_drake.perception.elevation_map import PriorDem
+
+    z, res, x0, y1 = map_dem_for_site(
+        heightfield=site.heightfield, points_xy=_map_points(scenario, site),
+        map_config=scenario.ground.map, seed=scenario.random_seed,
+    )  # fmt: skip
+    return PriorDem(z=z, resolution_m=res, x0_m=x0, y1_m=y1)
+
+
 def ground_costmap(scenario: Scenario, site):
     """The ground's costmap (``ground.map``, ``ground.hazards``): over the whole site
     when it has at most 4096^2 pixels, else around the spawn point, the goals and the
@@ -76,17 +102,9 @@ def ground_costmap(scenario: Scenario, site):
     from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
 
     g = scenario.ground
-    hf = site.heightfield
-    if hf.shape[0] * hf.shape[1] <= 4096**2:
-        b = hf.bounds
-        points = [(b.left, b.bottom), (b.right, b.top)]
-    else:
-        points = [(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)]
-        points += [(p.x_m, p.y_m) for p in g.goals]
-        points += [(a.x_m, a.y_m) for a in g.actions if a.action == "goal"]
     return costmap_for_site(
-        heightfield=hf,
-        points_xy=points,
+        heightfield=site.heightfield,
+        points_xy=_map_points(scenario, site),
         rover=RoverEnvelope.of(scenario.rover.description),
         hazards=g.hazards,
         map_config=g.map,
@@ -124,6 +142,48 @@ def scheduled_requests(scenario: Scenario) -> list:
     return out
 
 
+def command_preview(scenario: Scenario, *, prior_dem=None):
+    """``preview(pose, waypoints)`` for the operator: the flight software's follower run
+    forward from the ground's estimate (:func:`~lunar_drake.autonomy.preview.
+    preview_goto`) at the flight rate, at most 10 Hz, heights from ``prior_dem``."""
+    from lunar_drake.autonomy.preview import preview_goto
+    from lunar_drake.diagrams.flight import follower_params
+
+    g = scenario.ground
+    params = follower_params(scenario.rover.description)
+    rate = min(scenario.flight.rate_hz, 10.0)
+    height = None if prior_dem is None else prior_dem.sample
+
+    def preview(pose, waypoints):
+        return preview_goto(
+            pose=(pose[0], pose[1], pose[5]), waypoints=waypoints, speed_mps=g.drive_speed_mps,
+            tolerance_m=g.goto_tolerance_m, rate_hz=rate, params=params, height=height,
+        )  # fmt: skip
+
+    return preview
+
+
+def ground_perception(scenario: Scenario, *, costmap, prior_dem) -> GroundPerception:
+    """The ground's stereo / VO / mapping system (``ground.perception``) over the
+    a-priori ``costmap``: the rig calibration from the camera model and the rover's
+    kinematics (what operations know of the rover)."""
+    from lunar_drake.autonomy.costmap import RoverEnvelope
+    from lunar_drake.perception.calibration import StereoCalibration
+
+    d = scenario.rover.description
+    return GroundPerception(
+        config=scenario.ground.perception,
+        rate_hz=scenario.ground.rate_hz,
+        calib=StereoCalibration.from_camera(camera=scenario.sensors.camera, description=d),
+        description=d,
+        prior_costmap=costmap,
+        prior_dem=prior_dem,
+        rover=RoverEnvelope.of(d),
+        hazards=scenario.ground.hazards,
+        adc_bits=scenario.flight.images.adc_bits,
+    )
+
+
 def MakeGroundDiagram(*, scenario: Scenario, site=None):
     """Builds the ground-software diagram (named ``ground``): the operator
     (:class:`~lunar_drake.systems.ground_operator.GroundOperator`: the route, or the
@@ -135,10 +195,12 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
     unreachable from the previous one) are refused here, before the run."""
     g = scenario.ground
     builder = DiagramBuilder()
-    planner, in_map = None, None
+    planner, in_map, prior_dem, preview = None, None, None, None
     if site is not None:
         costmap = ground_costmap(scenario, site)
         planner = plan_waypoints(costmap)
+        prior_dem = ground_map_dem(scenario, site)
+        preview = command_preview(scenario, prior_dem=prior_dem)
 
         def in_map(x, y):
             return costmap.inside(*costmap.cell_of(x, y))
@@ -172,6 +234,7 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
             ),
             actions=scheduled_requests(scenario),
             in_map=in_map,
+            preview=preview,
         ),
     )
     receiver = builder.AddNamedSystem("ground.telemetry", TelemetryReceiver(rate_hz=g.rate_hz))
@@ -181,10 +244,21 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
     builder.ExportOutput(receiver.telemetry_output, "ground.telemetry")
     builder.ExportOutput(receiver.t_received_output, "ground.telemetry_t_received")
     builder.ExportOutput(operator.pose_estimate_output, "ground.pose_estimate")
+    builder.ExportOutput(operator.preview_output, "ground.preview")
     if sends_images(scenario):
         images = builder.AddNamedSystem("ground.images", ImageReceiver(rate_hz=g.rate_hz))
         builder.ExportInput(images.images_input, "downlink.images")
         builder.ExportOutput(images.frames_received_output, "ground.frames_received")
+        if g.perception.enabled and site is not None:
+            perception = builder.AddNamedSystem(
+                "ground.perception",
+                ground_perception(scenario, costmap=costmap, prior_dem=prior_dem),
+            )
+            builder.ConnectInput("downlink.images", perception.images_input)
+            builder.Connect(perception.costmap_output, operator.costmap_input)
+            if g.perception.use_vo:
+                builder.Connect(perception.pose_correction_output, operator.pose_correction_input)
+            builder.ExportOutput(perception.pose_correction_output, "ground.pose_correction")
     diagram = builder.Build()
     diagram.set_name("ground")
     return diagram

@@ -86,6 +86,11 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     if plant.HasOutputPort("radio.earth_visible"):  # loss of signal behind terrain
         for link in (uplink, downlink):
             builder.Connect(plant.GetOutputPort("radio.earth_visible"), link.earth_visible_input)
+    if meshcat is not None:  # the ground's command preview beside the live rover
+        from lunar_drake.systems.preview_visualizer import PreviewVisualizer
+
+        viz = builder.AddNamedSystem("preview_visualizer", PreviewVisualizer(meshcat=meshcat))
+        builder.Connect(ground.GetOutputPort("ground.preview"), viz.preview_input)
     # Exports for scoring, logging and displays.
     for k in range(plant.num_output_ports()):
         port = plant.get_output_port(k)

@@ -84,6 +84,8 @@ class StereoResult:
         valid: (H, W) bool. depth_m: (H, W) float32 Z (m; NaN where invalid).
         points: (H, W, 3) float32 (X, Y, Z) m in the rectified left camera frame.
         num_disparities: the disparity range searched (px).
+        left_8bit: (H, W) uint8, the rectified left image that was matched (None if
+            not kept).
     """
 
     disparity: np.ndarray
@@ -91,10 +93,17 @@ class StereoResult:
     depth_m: np.ndarray
     points: np.ndarray
     num_disparities: int
+    left_8bit: np.ndarray | None = None
 
     def cloud(self) -> np.ndarray:
         """The valid points (N, 3) (m, left camera frame)."""
         return self.points[self.valid]
+
+    def cloud_intensity(self) -> np.ndarray:
+        """The rectified left image's value (0..1) at each point of :meth:`cloud`."""
+        if self.left_8bit is None:
+            raise ConfigError("this StereoResult kept no left image")
+        return self.left_8bit[self.valid].astype(np.float64) / 255.0
 
 
 def to_8bit(left, right, *, low_percentile: float, high_percentile: float):
@@ -160,7 +169,8 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
             axis=-1,
         ).astype(np.float32)
     Z = pts[..., 2]
-    return StereoResult(disparity=disp, valid=valid, depth_m=Z, points=pts, num_disparities=n)
+    return StereoResult(disparity=disp, valid=valid, depth_m=Z, points=pts, num_disparities=n,
+                        left_8bit=l8)  # fmt: skip
 
 
 def depth_error(result: StereoResult, true_depth_m, *, near_m: float = 2.0, far_m: float = 10.0):

@@ -1,9 +1,20 @@
 """Visual odometry by ICP: align the point cloud of one stereo pair to the previous
 one with Open3D, judge the alignment, reject bad ones. Pure (numpy + Open3D).
 
-:func:`align` downsamples both clouds (``voxel_m``), estimates the target's normals and
-runs point-to-plane ICP (``registration_icp`` with a Huber robust kernel) from an
-initial guess (the downlinked on-board estimate's motion). Quality: the **fitness**
+:func:`align` runs ICP coarse to fine (``levels`` voxel sizes, ``voxel_m`` the finest,
+each twice the next; correspondences within ``correspondence_voxels`` voxels) from an
+initial guess (the downlinked on-board estimate's motion), with a Huber robust kernel:
+
+* ``method: point_to_plane``: Open3D ``registration_icp``, point-to-plane;
+* ``method: colored`` (default, when the points' image intensities are given): Open3D
+  ``registration_colored_icp`` (Park, Zhou & Koltun 2017): point-to-plane plus a
+  photometric term, the intensity gradient on each point's tangent plane, weighted
+  ``1 - lambda_geometric``. On smooth terrain the geometric term alone lets the clouds
+  slide along the ground (measured: errors of metres at 30-40 deg turns); the
+  regolith's texture pins them. Without intensities, point-to-plane.
+
+Quality is then judged on the finest clouds with correspondences within
+``max_correspondence_m``, whatever the method: the **fitness**
 (fraction of source points with a correspondence), the **inlier RMSE** and the
 **conditioning** of the 6 x 6 point-to-plane information matrix of the alignment
 (:func:`point_to_plane_information`: ``sum J^T J`` with ``J = [(p x n)^T, n^T]`` over
@@ -26,7 +37,9 @@ import math
 
 import numpy as np
 
-from lunar_drake.errors import check_range
+from lunar_drake.errors import ConfigError, check_range
+
+METHODS = ("colored", "point_to_plane")
 
 
 @dc.dataclass
@@ -34,21 +47,32 @@ class VoConfig:
     """ICP visual odometry settings.
 
     Attributes:
-        voxel_m: voxel size of the downsampling (m).
-        max_correspondence_m: farthest correspondence (m).
-        iterations: ICP iterations at most.
+        method: ``colored`` or ``point_to_plane`` (module docstring).
+        voxel_m: voxel size of the finest downsampling (m).
+        levels: coarse-to-fine levels (voxel sizes ``voxel_m * 2**k``).
+        correspondence_voxels: correspondence distance at each level (voxels).
+        lambda_geometric: weight of the geometric term in ``colored`` (0..1].
+        max_correspondence_m: correspondence distance of the quality measures (m).
+        iterations: ICP iterations at most, per level.
         huber_m: Huber kernel width (m).
         normal_radius_m: neighbourhood for the normals (m).
         min_fitness: reject below this fitness.
         max_rmse_m: reject above this inlier RMSE (m).
-        max_condition: reject above this information-matrix condition number.
+        max_condition: reject above this information-matrix condition number (the
+            geometric one: point-to-plane only; with ``colored`` the texture constrains
+            what the geometry leaves free, measured: 5 mm on a textured plane whose
+            geometric condition is 1e6).
         max_correction_m, max_correction_deg: reject when ICP moved the initial guess
             further (m, deg).
     """
 
-    voxel_m: float = 0.05
+    method: str = "colored"
+    voxel_m: float = 0.025
+    levels: int = 3
+    correspondence_voxels: float = 2.0
+    lambda_geometric: float = 0.968
     max_correspondence_m: float = 0.2
-    iterations: int = 50
+    iterations: int = 30
     huber_m: float = 0.05
     normal_radius_m: float = 0.15
     min_fitness: float = 0.3
@@ -59,7 +83,12 @@ class VoConfig:
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
+        if self.method not in METHODS:
+            raise ConfigError(f"method = {self.method!r} is unknown; choose one of {METHODS}")
         check_range("voxel_m", self.voxel_m, 0.001, 10.0, unit=" m")
+        check_range("levels", self.levels, 1, 8)
+        check_range("correspondence_voxels", self.correspondence_voxels, 0.5, 100.0)
+        check_range("lambda_geometric", self.lambda_geometric, 0.0, 1.0, lo_open=True)
         check_range("max_correspondence_m", self.max_correspondence_m, 0.001, 100.0, unit=" m")
         check_range("iterations", self.iterations, 1, 10000)
         check_range("huber_m", self.huber_m, 0.0001, 10.0, unit=" m")
@@ -91,13 +120,18 @@ class Alignment:
     n_target: int
 
 
-def _cloud(points, voxel_m: float):
+def _cloud(points, intensity=None):
     import open3d as o3d
 
     p = np.asarray(points, np.float64).reshape(-1, 3)
-    p = p[np.isfinite(p).all(axis=1)]
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
-    return pc.voxel_down_sample(voxel_m) if voxel_m > 0 else pc
+    ok = np.isfinite(p).all(axis=1)
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p[ok]))
+    if intensity is not None:
+        g = np.asarray(intensity, np.float64).reshape(-1)
+        if g.shape[0] != p.shape[0]:
+            raise ConfigError(f"{g.shape[0]} intensities for {p.shape[0]} points")
+        pc.colors = o3d.utility.Vector3dVector(np.repeat(np.clip(g[ok], 0.0, 1.0)[:, None], 3, 1))
+    return pc
 
 
 def point_to_plane_information(points, target_points, target_normals, max_dist_m: float,
@@ -131,29 +165,58 @@ def correction(T_a, T_b) -> tuple[float, float]:
     return float(np.linalg.norm(D[:3, 3])), math.degrees(math.acos(c))
 
 
-def align(prev_points, curr_points, *, init_T=None, config: VoConfig | None = None) -> Alignment:
+def align(prev_points, curr_points, *, init_T=None, config: VoConfig | None = None,
+          prev_intensity=None, curr_intensity=None) -> Alignment:  # fmt: skip
     """Aligns ``curr_points`` (N, 3; m, current camera frame) to ``prev_points`` (M, 3;
-    previous frame) from ``init_T`` (4 x 4 guess of ``T_prev_curr``; identity if None)."""
+    previous frame) from ``init_T`` (4 x 4 guess of ``T_prev_curr``; identity if None).
+    ``prev_intensity`` / ``curr_intensity`` (M,) / (N,): the points' image values (0..1)
+    for the ``colored`` method."""
     import open3d as o3d
 
     cfg = config or VoConfig()
     cfg.validate()
     reg = o3d.pipelines.registration
     init = np.eye(4) if init_T is None else np.asarray(init_T, np.float64)
-    src = _cloud(curr_points, cfg.voxel_m)
-    tgt = _cloud(prev_points, cfg.voxel_m)
+    colored = cfg.method == "colored" and prev_intensity is not None and curr_intensity is not None
+    src_full = _cloud(curr_points, curr_intensity if colored else None)
+    tgt_full = _cloud(prev_points, prev_intensity if colored else None)
+    src = src_full.voxel_down_sample(cfg.voxel_m)
+    tgt = tgt_full.voxel_down_sample(cfg.voxel_m)
     ns, nt = len(src.points), len(tgt.points)
     if ns < 10 or nt < 10:
         return Alignment(init, 0.0, math.inf, math.inf, np.zeros((6, 6)), True,
                          f"too few points ({ns}, {nt})", ns, nt)  # fmt: skip
-    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=cfg.normal_radius_m,
-                                                              max_nn=30))  # fmt: skip
-    result = reg.registration_icp(
-        src, tgt, cfg.max_correspondence_m, init,
-        reg.TransformationEstimationPointToPlane(reg.HuberLoss(k=cfg.huber_m)),
-        reg.ICPConvergenceCriteria(max_iteration=cfg.iterations),
-    )  # fmt: skip
-    T = np.asarray(result.transformation)
+    T = init
+    for level in reversed(range(cfg.levels)):
+        vox = cfg.voxel_m * 2**level
+        s_ = src if level == 0 else src_full.voxel_down_sample(vox)
+        t_ = tgt if level == 0 else tgt_full.voxel_down_sample(vox)
+        if len(s_.points) < 10 or len(t_.points) < 10:
+            continue
+        radius = max(cfg.normal_radius_m, 3.0 * vox)
+        search = o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30)
+        t_.estimate_normals(search)
+        crit = reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6,
+                                          max_iteration=cfg.iterations)  # fmt: skip
+        dist = cfg.correspondence_voxels * vox
+        try:
+            if colored:
+                s_.estimate_normals(search)
+                est = reg.TransformationEstimationForColoredICP(
+                    lambda_geometric=cfg.lambda_geometric, kernel=reg.HuberLoss(k=cfg.huber_m)
+                )
+                r = reg.registration_colored_icp(s_, t_, dist, T, est, crit)
+            else:
+                est = reg.TransformationEstimationPointToPlane(reg.HuberLoss(k=cfg.huber_m))
+                r = reg.registration_icp(s_, t_, dist, T, est, crit)
+        except RuntimeError as exc:  # Open3D: no correspondences at this level
+            return Alignment(T, 0.0, math.inf, math.inf, np.zeros((6, 6)), True,
+                             f"ICP failed: {str(exc).splitlines()[0][-80:]}", ns, nt)  # fmt: skip
+        T = np.asarray(r.transformation)
+    if not tgt.has_normals():
+        tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=cfg.normal_radius_m,
+                                                                  max_nn=30))  # fmt: skip
+    result = reg.evaluate_registration(src, tgt, cfg.max_correspondence_m, T)
     moved = np.asarray(src.points) @ T[:3, :3].T + T[:3, 3]
     info = point_to_plane_information(
         moved,
@@ -170,7 +233,7 @@ def align(prev_points, curr_points, *, init_T=None, config: VoConfig | None = No
         reason = f"fitness {result.fitness:.2f} < {cfg.min_fitness:g}"
     elif result.inlier_rmse > cfg.max_rmse_m:
         reason = f"inlier RMSE {result.inlier_rmse:.3f} m > {cfg.max_rmse_m:g} m"
-    elif cond > cfg.max_condition:
+    elif cond > cfg.max_condition and not colored:
         reason = f"degenerate geometry (information condition {cond:.3g})"
     elif dt > cfg.max_correction_m or dr > cfg.max_correction_deg:
         reason = f"moved the guess {dt:.2f} m, {dr:.1f} deg"
@@ -187,4 +250,4 @@ def align(prev_points, curr_points, *, init_T=None, config: VoConfig | None = No
     )
 
 
-__all__ = ["Alignment", "VoConfig", "align", "correction", "point_to_plane_information"]
+__all__ = ["METHODS", "Alignment", "VoConfig", "align", "correction", "point_to_plane_information"]

@@ -14,9 +14,11 @@ from lunar_drake.autonomy.operations import (
     OperatorParams,
     OperatorState,
     Request,
+    corrected_pose,
     ground_pose,
     operator_step,
 )
+from lunar_drake.autonomy.planner import path_blocked
 from lunar_drake.errors import OutOfBoundsError, OutOfRangeError
 
 
@@ -28,9 +30,12 @@ class GroundOperator(LeafSystem):
         name: GroundOperator
         input_ports:
         - telemetry
+        - pose_correction
+        - costmap
         output_ports:
         - commands
         - pose_estimate
+        - preview
 
     ``telemetry`` is the downlink inbox (deliveries of telemetry packets). Every
     1 / ``rate_hz`` s it runs :func:`~lunar_drake.autonomy.operations.operator_step`
@@ -39,8 +44,15 @@ class GroundOperator(LeafSystem):
     :meth:`drive_arc`, :meth:`point_mast`, between ``AdvanceTo`` calls). ``commands`` is
     the uplink outbox (the messages made at the latest tick); ``pose_estimate`` (6,) the
     ground's estimate of the rover's pose (x, y, z, roll, pitch, yaw; m, rad; site
-    frame) from the newest telemetry carried forward to now. State (abstract): the
-    OperatorState and the Python requests waiting for the next tick.
+    frame) from the newest telemetry carried forward to now. Optional inputs from the
+    ground's perception (:class:`~lunar_drake.systems.ground_perception.
+    GroundPerception`): ``pose_correction`` (dx, dy, dyaw) applied to that estimate, and
+    ``costmap`` ((version, Costmap)): plans are made on it and, when its version
+    changes, the path being driven is checked against it (replanned if a new hazard
+    blocks it). ``preview`` (abstract): (goto seq, (N, 4) array of t, x, y, z) the
+    predicted path of the newest goto sent (``preview`` argument: ``preview(pose,
+    waypoints)``; (-1, None) before). State (abstract): the OperatorState and the Python
+    requests waiting for the next tick.
 
     Args:
         params: :class:`~lunar_drake.autonomy.operations.OperatorParams`.
@@ -51,17 +63,22 @@ class GroundOperator(LeafSystem):
         actions: ((t_s, Request), ...) scheduled requests, sorted by time.
         in_map: ``in_map(x, y)`` -> True if the point is on the ground's map (checked
             by :meth:`send_goal`).
+        preview: ``preview(pose, waypoints)`` -> predicted path of a goto (the command
+            preview), or None.
     """
 
     def __init__(self, *, params: OperatorParams, rate_hz: float, planner, start_pose,
-                 actions=(), in_map=None):  # fmt: skip
+                 actions=(), in_map=None, preview=None):  # fmt: skip
         super().__init__()
         self._params = params
         self._planner = planner
         self._start = tuple(float(v) for v in start_pose)
         self._actions = tuple(sorted(actions, key=lambda a: a[0]))
         self._in_map = in_map
+        self._preview = preview
         self.telemetry_input = self.DeclareAbstractInputPort("telemetry", AbstractValue.Make(()))
+        self.pose_correction_input = self.DeclareVectorInputPort("pose_correction", 3)
+        self.costmap_input = self.DeclareAbstractInputPort("costmap", AbstractValue.Make((0, None)))
         # (OperatorState, index of the next scheduled action, Python requests)
         self._state = self.DeclareAbstractState(AbstractValue.Make((OperatorState(), 0, ())))
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
@@ -69,6 +86,12 @@ class GroundOperator(LeafSystem):
             TOPIC,
             lambda: AbstractValue.Make(()),
             lambda c, o: o.set_value(self.operator_state(c).outbox),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )
+        self.preview_output = self.DeclareAbstractOutputPort(
+            "preview",
+            lambda: AbstractValue.Make((-1, None)),
+            lambda c, o: o.set_value(self.operator_state(c).preview),
             prerequisites_of_calc={self.all_state_ticket()},
         )
         self.pose_estimate_output = self.DeclareVectorOutputPort(
@@ -151,12 +174,14 @@ class GroundOperator(LeafSystem):
             x, y, yaw = self._start
             output.SetFromVector([x, y, 0.0, 0.0, 0.0, yaw])
             return
-        output.SetFromVector(
-            ground_pose(
-                st.packet, st.t_sent, context.get_time(),
-                max_extrapolation_s=self._params.max_extrapolation_s,
-            )
-        )  # fmt: skip
+        pose = ground_pose(st.packet, st.t_sent, context.get_time(),
+                           max_extrapolation_s=self._params.max_extrapolation_s)  # fmt: skip
+        output.SetFromVector(corrected_pose(pose, self._correction(context)))
+
+    def _correction(self, context):
+        if not self.pose_correction_input.HasValue(context):
+            return (0.0, 0.0, 0.0)
+        return tuple(self.pose_correction_input.Eval(context))
 
     def _update(self, context, state):
         now = context.get_time()
@@ -165,14 +190,27 @@ class GroundOperator(LeafSystem):
         while k < len(self._actions) and self._actions[k][0] <= now + 1e-9:
             due.append(self._actions[k][1])
             k += 1
+        planner, version, blocked = self._planner, 0, None
+        if self.costmap_input.HasValue(context):
+            version, costmap = self.costmap_input.Eval(context)
+            if costmap is not None:
+                planner = plan_waypoints(costmap)
+
+                def blocked(path, xy, costmap=costmap):
+                    return path_blocked(costmap=costmap, path_xy=path, from_xy=xy)
+
         st = operator_step(
             st,
             self.telemetry_input.Eval(context),
             now=now,
             params=self._params,
-            planner=self._planner,
+            planner=planner,
             start_pose=self._start,
             requests=(*due, *reqs),
+            correction=self._correction(context),
+            map_version=int(version),
+            blocked=blocked,
+            preview=self._preview,
         )
         state.get_mutable_abstract_state(self._state).set_value((st, k, ()))
 

@@ -1,0 +1,335 @@
+"""The ground's perception step: downlinked stereo frames -> stereo clouds -> ICP visual
+odometry fused with the on-board estimate -> local elevation map -> hazards merged into
+the costmap. Pure (numpy, OpenCV, Open3D); no Drake.
+
+Per received frame (:class:`~lunar_drake.comms.images.StereoFrame`, its header carrying
+the on-board pose estimate and the gimbal angles at capture):
+
+* **keyframes**: a frame is processed when the on-board estimate has moved at least
+  ``keyframe_m`` or turned ``keyframe_deg`` since the last keyframe (the first frame is
+  one); the others are skipped (the ground's compute goes to keyframes).
+* **stereo** (:func:`~lunar_drake.perception.stereo.match`): the left camera's cloud,
+  points within ``max_range_m``.
+* **VO** (:func:`~lunar_drake.perception.vo.align`): the cloud aligned to the previous
+  keyframe's from the on-board motion between the two (``T_odom``).
+* **fusion** (the ground's filter): the camera's motion between keyframes is the
+  inverse-variance mean of the on-board translation (sigma ``odom_sigma_fraction`` x
+  distance + ``odom_sigma_min_m``) and the VO translation (sigma ``vo_sigma_m``), the
+  rotation the on-board one (star tracker: arcseconds). A rejected alignment leaves
+  the on-board motion. The ground's keyframe pose is the previous one composed with
+  the fused motion; ``correction`` (4 x 4) maps on-board poses to the ground's
+  (``X_W_ground = correction @ X_W_onboard``), applied to telemetry between keyframes.
+  This is a Kalman update of the relative motion with isotropic, constant-shape
+  covariances (no cross-correlations, no attitude update): an approximation.
+* **mapping**: the cloud, in the ground's estimated frame, fused into a local
+  elevation map (:mod:`~lunar_drake.perception.elevation_map`, a ``window_m`` square
+  re-centred on the rover when it nears an edge; what leaves it stays in the costmap);
+  its hazards merged into the ground's costmap (never clearing the a-priori hazards).
+
+Frames: ``X_WB`` chassis in the site frame, ``X_BC`` left camera in the chassis frame
+(``camera_in_chassis(pan, tilt)``), camera axes x right, y down, z forward.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads real field types.
+
+import dataclasses as dc
+import math
+
+import numpy as np
+
+from lunar_drake.comms.messages import Ledger
+from lunar_drake.errors import check_range
+from lunar_drake.perception.elevation_map import ElevationMapConfig
+from lunar_drake.perception.stereo import StereoConfig
+from lunar_drake.perception.vo import VoConfig
+
+
+@dc.dataclass
+class PerceptionConfig:
+    """The ground's perception (``ground.perception`` in the scenario).
+
+    Attributes:
+        enabled: run it (needs downlinked frames: cameras on and ``flight.images``).
+        keyframe_m, keyframe_deg: process a frame once the on-board estimate moved this
+            far (m) or turned this much (deg) since the last keyframe.
+        max_range_m: stereo points beyond this depth are not aligned (m); the map has
+            its own range limits (``map``).
+        gimbal_settle_s: frames taken less than this long after the gimbal command
+            changed are skipped (the mast was still moving; s).
+        prior_gate_m: with an a-priori DEM, points further than this above or below it
+            (after the median offset between the two) are dropped (m): far terrain
+            matched wrongly lands at camera height; rocks taller than this are not
+            expected.
+        self_radius_m: points within this horizontal distance of the chassis origin
+            (m; 0: half the wheelbase + wheel radius + the footprint radius, the rover's
+            own wheels and body) are left out of the map.
+        window_m: side of the local elevation map (m).
+        use_vo: fuse VO into the ground's pose (else the on-board estimate alone).
+        odom_sigma_fraction, odom_sigma_min_m: on-board translation sigma between
+            keyframes: fraction of the distance, plus a floor (m).
+        vo_sigma_m: VO translation sigma per keyframe link (m).
+        stereo, vo, map: :class:`StereoConfig`, :class:`VoConfig`,
+            :class:`ElevationMapConfig` (its ``focal_px`` and ``baseline_m`` are not
+            read: they come from the rig's calibration).
+    """
+
+    enabled: bool = True
+    keyframe_m: float = 1.0
+    keyframe_deg: float = 10.0
+    max_range_m: float = 6.0
+    gimbal_settle_s: float = 2.0
+    self_radius_m: float = 0.0
+    prior_gate_m: float = 1.0
+    window_m: float = 30.0
+    use_vo: bool = True
+    odom_sigma_fraction: float = 0.02
+    odom_sigma_min_m: float = 0.005
+    vo_sigma_m: float = 0.02
+    stereo: StereoConfig = dc.field(default_factory=StereoConfig)
+    vo: VoConfig = dc.field(default_factory=VoConfig)
+    map: ElevationMapConfig = dc.field(default_factory=ElevationMapConfig)
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
+        check_range("keyframe_m", self.keyframe_m, 0.0, 100.0, unit=" m")
+        check_range("keyframe_deg", self.keyframe_deg, 0.0, 180.0, unit=" deg")
+        check_range("max_range_m", self.max_range_m, 1.0, 100.0, unit=" m")
+        check_range("gimbal_settle_s", self.gimbal_settle_s, 0.0, 600.0, unit=" s")
+        check_range("prior_gate_m", self.prior_gate_m, 0.01, 100.0, unit=" m")
+        check_range("self_radius_m", self.self_radius_m, 0.0, 20.0, unit=" m")
+        check_range("window_m", self.window_m, 2.0 * self.max_range_m, 1000.0, unit=" m")
+        check_range("odom_sigma_fraction", self.odom_sigma_fraction, 0.0, 1.0)
+        check_range("odom_sigma_min_m", self.odom_sigma_min_m, 1e-6, 10.0, unit=" m")
+        check_range("vo_sigma_m", self.vo_sigma_m, 1e-6, 10.0, unit=" m")
+        self.stereo.validate()
+        self.vo.validate()
+        self.map.validate()
+
+
+@dc.dataclass(frozen=True)
+class KeyframeRecord:
+    """One processed keyframe: capture time ``t_capture_s``, ``frame_index``, stereo
+    points kept, VO outcome (``vo``: ``none`` first keyframe / ``accepted`` /
+    ``rejected`` / ``off``, ``reason``, ``fitness``, ``inlier_rmse_m``, ``condition``),
+    the on-board and VO translations between keyframes (m) and how far they differ
+    (``vo_minus_odom_m``), the ground's pose (x, y, yaw; m, rad) and the lethal cells the
+    map added (``new_lethal``)."""
+
+    t_capture_s: float
+    frame_index: int
+    points: int
+    vo: str
+    reason: str
+    fitness: float
+    inlier_rmse_m: float
+    condition: float
+    odom_step_m: float
+    vo_step_m: float
+    vo_minus_odom_m: float
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    new_lethal: int
+
+
+@dc.dataclass(frozen=True)
+class PerceptionState:
+    """What the ground's perception holds between frames (immutable; shared, not
+    copied, by Drake's state copies)."""
+
+    last_seq: int = -1
+    key_cloud: np.ndarray | None = None
+    key_intensity: np.ndarray | None = None
+    key_X_WC_onboard: np.ndarray | None = None
+    key_X_WC_ground: np.ndarray | None = None
+    correction: np.ndarray = dc.field(default_factory=lambda: np.eye(4))
+    emap: object = None
+    costmap: object = None
+    version: int = 0
+    records: Ledger = dc.field(default_factory=Ledger)
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+def pose_matrix(pose6) -> np.ndarray:
+    """4 x 4 ``X_WB`` from (x, y, z, roll, pitch, yaw) (m, rad; R = Rz Ry Rx)."""
+    x, y, z, r, p, w = (float(v) for v in pose6)
+    cr, sr, cp, sp, cw, sw = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(w), \
+        math.sin(w)  # fmt: skip
+    X = np.eye(4)
+    X[:3, :3] = np.array([
+        [cw * cp, cw * sp * sr - sw * cr, cw * sp * cr + sw * sr],
+        [sw * cp, sw * sp * sr + cw * cr, sw * sp * cr - cw * sr],
+        [-sp, cp * sr, cp * cr],
+    ])  # fmt: skip
+    X[:3, 3] = (x, y, z)
+    return X
+
+
+def planar_correction(correction) -> tuple[float, float, float]:
+    """(dx, dy, dyaw) of a correction matrix as a planar map: ``p' = Rz(dyaw) p + d``."""
+    C = np.asarray(correction, np.float64)
+    dyaw = math.atan2(C[1, 0], C[0, 0])
+    return float(C[0, 3]), float(C[1, 3]), dyaw
+
+
+def fuse_translation(t_odom, t_vo, *, sigma_odom_m: float, sigma_vo_m: float) -> np.ndarray:
+    """Inverse-variance mean of two translation estimates (isotropic sigmas, m)."""
+    wo, wv = 1.0 / sigma_odom_m**2, 1.0 / sigma_vo_m**2
+    return (wo * np.asarray(t_odom, np.float64) + wv * np.asarray(t_vo, np.float64)) / (wo + wv)
+
+
+def _moved(X0, X1) -> tuple[float, float]:
+    D = np.linalg.inv(X0) @ X1
+    c = max(-1.0, min(1.0, 0.5 * (np.trace(D[:3, :3]) - 1.0)))
+    return float(np.linalg.norm(D[:3, 3])), math.degrees(math.acos(c))
+
+
+def _recentred(emap, centre_xy, *, window_m: float, cell_m: float):
+    """``emap`` (or a new one) covering ``centre_xy``: re-centred when the point lies
+    within a quarter window of an edge (the overlap copied over)."""
+    from lunar_drake.perception.elevation_map import ElevationMap
+
+    n = round(window_m / cell_m)
+    x, y = float(centre_xy[0]), float(centre_xy[1])
+    if emap is not None:
+        half = 0.25 * window_m
+        x0, y1 = emap.x0_m, emap.y1_m
+        if x0 + half <= x <= x0 + window_m - half and y1 - window_m + half <= y <= y1 - half:
+            return emap
+    # snap the new origin to the cell grid so cells stay aligned
+    x0 = math.floor((x - 0.5 * window_m) / cell_m) * cell_m
+    y1 = math.floor((y + 0.5 * window_m) / cell_m) * cell_m
+    new = ElevationMap.empty(x0_m=x0, y1_m=y1, cell_m=cell_m, shape=(n, n))
+    if emap is None:
+        return new
+    dc_ = round((emap.x0_m - x0) / cell_m)
+    dr = round((y1 - emap.y1_m) / cell_m)
+    r0, r1 = max(0, dr), min(n, dr + emap.shape[0])
+    c0, c1 = max(0, dc_), min(n, dc_ + emap.shape[1])
+    if r0 >= r1 or c0 >= c1:
+        return new
+    fields = {}
+    for f in dc.fields(new):
+        a = getattr(new, f.name)
+        if isinstance(a, np.ndarray) and a.shape[:2] == (n, n):
+            a = a.copy()
+            a[r0:r1, c0:c1] = getattr(emap, f.name)[r0 - dr : r1 - dr, c0 - dc_ : c1 - dc_]
+            fields[f.name] = a
+    return dc.replace(new, **fields)
+
+
+def perception_step(
+    state: PerceptionState, frames, *, calib, camera_in_chassis, decode, prior, rover,
+    hazards, config: PerceptionConfig,
+) -> PerceptionState:  # fmt: skip
+    """Handles ``frames`` ((seq, StereoFrame), ...; those with seq <= ``last_seq`` are
+    skipped) and returns the new state.
+
+    ``calib``: the rig's :class:`~lunar_drake.perception.calibration.StereoCalibration`;
+    ``camera_in_chassis(pan, tilt)`` -> ``X_BC`` (4 x 4); ``decode(encoded)`` -> raw
+    frame; ``prior``: the a-priori DEM (:class:`~lunar_drake.perception.
+    elevation_map.PriorDem`) or None; ``rover``, ``hazards``: as the costmap's.
+    ``state.costmap`` must hold the a-priori costmap before the first frame.
+    """
+    from lunar_drake.perception.elevation_map import (
+        fuse,
+        merge_into_costmap,
+        points_to_world,
+        stereo_hazards,
+    )
+    from lunar_drake.perception.stereo import match
+    from lunar_drake.perception.vo import align
+
+    s = state
+    map_cfg = dc.replace(config.map, focal_px=calib.focal_px, baseline_m=calib.baseline_m)
+    self_r = config.self_radius_m or (
+        0.5 * rover.wheelbase_m + rover.wheel_radius_m + rover.footprint_radius_m
+    )
+    for seq, frame in frames:
+        if seq <= s.last_seq:
+            continue
+        s = dc.replace(s, last_seq=seq)
+        pose = np.asarray(frame.pose_estimate, np.float64)
+        pan_tilt = np.asarray(frame.pan_tilt_rad, np.float64)
+        if not (np.isfinite(pose).all() and np.isfinite(pan_tilt).all()):
+            continue  # a frame without its header state cannot be placed
+        if frame.gimbal_steady_s < config.gimbal_settle_s:
+            continue  # the mast was moving: the camera pose is not known
+        X_WC_onboard = pose_matrix(pose) @ camera_in_chassis(*pan_tilt)
+        first = s.key_X_WC_onboard is None
+        if not first:
+            dist, turn = _moved(s.key_X_WC_onboard, X_WC_onboard)
+            if dist < config.keyframe_m and turn < config.keyframe_deg:
+                continue
+        res = match(decode(frame.left), decode(frame.right), calib=calib, config=config.stereo)
+        near = res.valid & (res.points[..., 2] <= config.max_range_m)
+        cloud = res.points[near]
+        intensity = res.left_8bit[near].astype(np.float64) / 255.0
+        vo, reason, fit, rmse, cond = "none", "", math.nan, math.nan, math.nan
+        odom_step = vo_step = diff = math.nan
+        if first:
+            X_WC_ground = s.correction @ X_WC_onboard
+        else:
+            T_odom = np.linalg.inv(s.key_X_WC_onboard) @ X_WC_onboard
+            T = T_odom.copy()
+            odom_step = float(np.linalg.norm(T_odom[:3, 3]))
+            if config.use_vo:
+                al = align(s.key_cloud, cloud, init_T=T_odom, config=config.vo,
+                           prev_intensity=s.key_intensity, curr_intensity=intensity)  # fmt: skip
+                fit, rmse, cond, reason = al.fitness, al.inlier_rmse_m, al.condition, al.reason
+                vo_step = float(np.linalg.norm(al.T_prev_curr[:3, 3]))
+                diff = float(np.linalg.norm(al.T_prev_curr[:3, 3] - T_odom[:3, 3]))
+                if al.rejected:
+                    vo = "rejected"
+                else:
+                    vo = "accepted"
+                    sig_o = config.odom_sigma_fraction * odom_step + config.odom_sigma_min_m
+                    T[:3, 3] = fuse_translation(T_odom[:3, 3], al.T_prev_curr[:3, 3],
+                                                sigma_odom_m=sig_o,
+                                                sigma_vo_m=config.vo_sigma_m)  # fmt: skip
+            else:
+                vo = "off"
+            X_WC_ground = s.key_X_WC_ground @ T
+        correction = X_WC_ground @ np.linalg.inv(X_WC_onboard)
+        # Mapping in the ground's frame.
+        p_W = points_to_world(res.points[res.valid], X_WC_ground)  # the map: its own range
+        X_WB_ground = correction @ pose_matrix(pose)
+        p_W = p_W[np.hypot(p_W[:, 0] - X_WB_ground[0, 3], p_W[:, 1] - X_WB_ground[1, 3]) > self_r]
+        if prior is not None and len(p_W):
+            dev = p_W[:, 2] - prior.sample(p_W[:, 0], p_W[:, 1])
+            p_W = p_W[np.abs(dev - np.median(dev)) <= config.prior_gate_m]
+        emap = _recentred(s.emap, X_WC_ground[:2, 3], window_m=config.window_m,
+                          cell_m=map_cfg.cell_m)  # fmt: skip
+        emap = fuse(emap, points_W=p_W, sensor_origin_W=X_WC_ground[:3, 3], config=map_cfg,
+                    time_s=frame.t_capture_s)  # fmt: skip
+        haz = stereo_hazards(emap, hazards=hazards, rover=rover, config=map_cfg, prior=prior)
+        before = int(np.count_nonzero(s.costmap.lethal_raw))
+        costmap = merge_into_costmap(s.costmap, stereo=haz, rover=rover, hazards=hazards)
+        new_lethal = int(np.count_nonzero(costmap.lethal_raw)) - before
+        rec = KeyframeRecord(
+            t_capture_s=float(frame.t_capture_s), frame_index=int(frame.frame_index),
+            points=len(cloud), vo=vo, reason=reason, fitness=float(fit),
+            inlier_rmse_m=float(rmse), condition=float(cond), odom_step_m=odom_step,
+            vo_step_m=vo_step, vo_minus_odom_m=diff, x_m=float(X_WB_ground[0, 3]),
+            y_m=float(X_WB_ground[1, 3]),
+            yaw_rad=math.atan2(X_WB_ground[1, 0], X_WB_ground[0, 0]), new_lethal=new_lethal,
+        )  # fmt: skip
+        s = dc.replace(
+            s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,
+            key_X_WC_ground=X_WC_ground, correction=correction, emap=emap, costmap=costmap,
+            version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
+        )  # fmt: skip
+    return s
+
+
+__all__ = [
+    "KeyframeRecord",
+    "PerceptionConfig",
+    "PerceptionState",
+    "fuse_translation",
+    "perception_step",
+    "planar_correction",
+    "pose_matrix",
+]

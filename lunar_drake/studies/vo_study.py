@@ -1,0 +1,512 @@
+"""Visual odometry against fused odometry (paper Fig. 21), on rendered stereo pairs.
+
+**Rotation** (``angles``): for each angle A and seed, the mission's rover (the
+scenario's, its full plant, flight software and link) stands still, takes a stereo pair,
+turns in place by A (an uplinked drive command, yaw rate ``turn_rate_dps``), stops and
+takes a second pair. Seeds change the spawn point (within ``spawn_radius_m`` of the
+scenario's), the heading and every noise stream.
+
+**Straight** (``straight_m``): the rover drives straight that far at ``speed_mps``; VO
+chains keyframes ``keyframe_m`` apart (by the on-board estimate): each pair is aligned
+to the previous keyframe's, a rejected alignment is replaced by the on-board motion for
+that link (counted).
+
+For each motion the camera's relative pose ``T_C0_C1`` (left camera, 4 x 4) is known
+three ways:
+
+* **truth**: from the plant's left-camera frame at the two capture instants (scoring
+  only);
+* **odometry**: the flight EKF's estimate (wheel odometry, IMU, star tracker) at the
+  two instants, with the camera mounted on the chassis as the kinematic chain says
+  (chassis-to-camera from the gimbal's measured angles: taken from the plant, exact);
+* **VO**: ICP (:func:`lunar_drake.perception.vo.align`) of the two stereo clouds
+  (:func:`lunar_drake.perception.stereo.match`, points within ``max_range_m``) from the
+  odometry motion as the initial guess.
+
+``vo_error_m`` and ``odom_error_m``: the norm of the difference between the estimated
+and true camera translation (m, in the first camera frame). The frames are the raw
+12-bit frames the camera produces; the image downlink's PNG is lossless, so the ground
+would receive the same bytes.
+
+``lights``: the ``night`` scenario's epoch (Sun below the horizon) with the rover's
+headlights (its exposure and gain), in place of the scenario's lighting.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses as dc
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from lunar_drake import rng
+from lunar_drake.errors import ConfigError, SimulationError, check_range
+from lunar_drake.files import atomic_path, atomic_write_text, ensure_output_dir
+
+CSV_COLUMNS = (
+    "angle_deg",
+    "seed",
+    "vo_error_m",
+    "odom_error_m",
+    "rejected",
+    "reason",
+    "true_rotation_deg",
+    "true_translation_m",
+    "fitness",
+    "inlier_rmse_m",
+    "condition",
+    "n_points_0",
+    "n_points_1",
+    "lights",
+)
+
+
+@dc.dataclass(frozen=True)
+class VoStudyConfig:
+    """What the study runs.
+
+    Attributes:
+        scenario_name: the named scenario whose site, rover and sensors are used.
+        angles_deg: rotation angles (deg, >= 0) for the rotation study.
+        seeds: runs per angle (seeds 0 .. seeds - 1).
+        straight_m: drive this far straight instead (m; None: the rotation study).
+        lights: in shadow with the rover's headlights (the ``night`` scenario's epoch).
+        width, height: camera image size (px).
+        turn_rate_dps: commanded yaw rate of the turns (deg/s).
+        speed_mps: commanded speed of the straight drive (m/s).
+        keyframe_m: VO keyframe spacing on the straight drive (m, by the estimate).
+        spawn_radius_m: seeds move the spawn within this radius of the scenario's (m).
+        max_range_m: stereo points beyond this depth are not aligned (m).
+    """
+
+    scenario_name: str = "default"
+    angles_deg: tuple = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)
+    seeds: int = 3
+    straight_m: float | None = None
+    lights: bool = False
+    width: int = 1024
+    height: int = 768
+    turn_rate_dps: float = 5.0
+    speed_mps: float = 0.2
+    keyframe_m: float = 1.0
+    spawn_radius_m: float = 10.0
+    max_range_m: float = 6.0
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
+        if not self.angles_deg and self.straight_m is None:
+            raise ConfigError("no angles given; pass --angles A:B:STEP or --straight DIST_M")
+        for a in self.angles_deg:
+            check_range("angle", a, 0.0, 180.0, unit=" deg")
+        check_range("seeds", self.seeds, 1, 1000)
+        if self.straight_m is not None:
+            check_range("straight distance", self.straight_m, 0.0, 500.0, lo_open=True,
+                        unit=" m")  # fmt: skip
+        check_range("turn_rate_dps", self.turn_rate_dps, 0.0, 45.0, lo_open=True, unit=" deg/s")
+        check_range("speed_mps", self.speed_mps, 0.0, 2.0, lo_open=True, unit=" m/s")
+        check_range("keyframe_m", self.keyframe_m, 0.05, 10.0, unit=" m")
+        check_range("spawn_radius_m", self.spawn_radius_m, 0.0, 100.0, unit=" m")
+        check_range("max_range_m", self.max_range_m, 1.0, 100.0, unit=" m")
+
+
+def parse_angles(text: str) -> tuple:
+    """'A:B:STEP' (inclusive) or a comma list -> angles in degrees."""
+    try:
+        if ":" in text:
+            a, b, step = (float(v) for v in text.split(":"))
+            if step <= 0 or b < a:
+                raise ValueError
+            n = math.floor((b - a) / step + 1e-9) + 1
+            return tuple(round(a + k * step, 9) for k in range(n))
+        return tuple(float(v) for v in text.split(","))
+    except ValueError as exc:
+        raise ConfigError(
+            f"--angles {text!r} must be A:B:STEP with STEP > 0 and B >= A, or a comma list"
+        ) from exc
+
+
+# ----------------------------------------------------------------------------------------
+# one run
+# ----------------------------------------------------------------------------------------
+@dc.dataclass
+class _Capture:
+    """One stereo pair and the poses at its capture instant."""
+
+    t: float
+    left: np.ndarray
+    right: np.ndarray
+    X_WC: np.ndarray  # truth, left camera (4 x 4)
+    X_WC_est: np.ndarray  # on-board estimate of the same (4 x 4)
+
+
+def _scenario_for(config: VoStudyConfig, seed: int):
+    from lunar_drake.scenario_files import load_scenario
+
+    s = load_scenario(scenario_name=config.scenario_name)
+    if config.lights:
+        night = load_scenario(scenario_name="night")
+        s.site.epoch_utc = night.site.epoch_utc
+        s.rover.lights = copy.deepcopy(night.rover.lights)
+        s.sensors.camera.exposure_s = night.sensors.camera.exposure_s
+        s.sensors.camera.gain = night.sensors.camera.gain
+        s.comms = copy.deepcopy(night.comms)
+    s.random_seed = int(seed)
+    g = rng.generator(int(seed), "vo_study.spawn")
+    r = config.spawn_radius_m * math.sqrt(g.uniform())
+    b = g.uniform(0.0, 2.0 * math.pi)
+    s.rover.spawn_x_m += r * math.cos(b)
+    s.rover.spawn_y_m += r * math.sin(b)
+    s.rover.spawn_yaw_deg = float(g.uniform(0.0, 360.0))
+    cam = s.sensors.camera
+    cam.enabled = True
+    cam.width, cam.height = config.width, config.height
+    cam.rate_hz = 1.0
+    cam.validate()
+    s.flight.images.enabled = False
+    s.ground.goals = []
+    s.ground.actions = []
+    return s
+
+
+def _route(config: VoStudyConfig, angle_deg: float):
+    """(route, motion start guess (s)) -- idle, the motion, idle."""
+    from lunar_drake.scenario import RouteSegment
+
+    idle = RouteSegment(duration_s=4.0)
+    if config.straight_m is not None:
+        move = RouteSegment(duration_s=config.straight_m / config.speed_mps,
+                            vx_mps=config.speed_mps)  # fmt: skip
+    else:
+        w = math.radians(config.turn_rate_dps)
+        move = RouteSegment(duration_s=max(math.radians(angle_deg) / w, 1e-3), wz_radps=w)
+    return [idle, move, RouteSegment(duration_s=30.0)]
+
+
+class _Rig:
+    """The mission diagram of one run and what the study reads from it."""
+
+    def __init__(self, scenario, site):
+        from pydrake.systems.analysis import Simulator
+
+        from lunar_drake.diagrams.mission import MakeMissionDiagram
+
+        self.mission = MakeMissionDiagram(scenario=scenario, site=site)
+        self.sim = Simulator(self.mission)
+        self.sim.Initialize()
+        root = self.sim.get_context()
+        plant = self.mission.GetSubsystemByName("plant")
+        self.cam = plant.GetSubsystemByName("camera")
+        self.mbp = plant.GetSubsystemByName("plant")
+        est = self.mission.GetSubsystemByName("flight").GetSubsystemByName("flight.estimator")
+        self.est = est
+        self._cam_ctx = self.cam.GetMyContextFromRoot(root)
+        self._mbp_ctx = self.mbp.GetMyContextFromRoot(root)
+        self._est_ctx = est.GetMyContextFromRoot(root)
+        self.period = 1.0 / scenario.sensors.camera.rate_hz
+
+    def advance_to(self, t: float) -> None:
+        self.sim.AdvanceTo(t)
+
+    def X_WB(self) -> np.ndarray:
+        return self.mbp.GetBodyByName("chassis").EvalPoseInWorld(self._mbp_ctx).GetAsMatrix4()
+
+    def capture(self, k: int) -> _Capture:
+        """Advances to camera frame ``k`` and returns it with the poses at that instant."""
+        from pydrake.common.eigen_geometry import Quaternion
+
+        t = k * self.period + 1e-6
+        self.advance_to(t)
+        X_WC = self.mbp.GetFrameByName("left_camera").CalcPoseInWorld(self._mbp_ctx).GetAsMatrix4()
+        X_WB = self.X_WB()
+        p = np.asarray(self.est.p_WB_output.Eval(self._est_ctx), float)
+        q = np.asarray(self.est.q_WB_output.Eval(self._est_ctx), float)
+        X_WB_est = np.eye(4)
+        X_WB_est[:3, :3] = Quaternion(q / np.linalg.norm(q)).rotation()
+        X_WB_est[:3, 3] = p
+        X_WC_est = X_WB_est @ np.linalg.inv(X_WB) @ X_WC
+        left = np.array(self.cam.frame(self._cam_ctx, "left").raw)
+        right = np.array(self.cam.frame(self._cam_ctx, "right").raw)
+        return _Capture(t, left, right, X_WC, X_WC_est)
+
+    def yaw_rate(self) -> float:
+        v = self.mbp.GetBodyByName("chassis").EvalSpatialVelocityInWorld(self._mbp_ctx)
+        return float(abs(v.rotational()[2]))
+
+    def speed(self) -> float:
+        v = self.mbp.GetBodyByName("chassis").EvalSpatialVelocityInWorld(self._mbp_ctx)
+        return float(np.linalg.norm(v.translational()[:2]))
+
+
+def _relative(X0, X1) -> np.ndarray:
+    return np.linalg.inv(X0) @ X1
+
+
+def _translation_error(T_est, T_true) -> float:
+    return float(np.linalg.norm(np.asarray(T_est)[:3, 3] - np.asarray(T_true)[:3, 3]))
+
+
+def _cloud(capture: _Capture, *, calib, stereo_config, max_range_m: float) -> tuple:
+    """(points (N, 3) m, left camera frame; their image intensities (N,) 0..1)."""
+    from lunar_drake.perception.stereo import match
+
+    res = match(capture.left, capture.right, calib=calib, config=stereo_config)
+    c, g = res.cloud(), res.cloud_intensity()
+    near = c[:, 2] <= max_range_m
+    return c[near], g[near]
+
+
+def _wait_still(rig: _Rig, k: int, *, moving_from_k: int, max_k: int) -> int:
+    """The first frame index after the rover started and then came to rest (yaw rate and
+    speed ~0 over one frame period)."""
+    started = False
+    for kk in range(k, max_k):
+        rig.advance_to(kk * rig.period + 1e-6)
+        still = rig.yaw_rate() < math.radians(0.05) and rig.speed() < 0.002
+        if not still:
+            started = True
+        elif started or kk >= moving_from_k + 30:
+            rig.advance_to((kk + 1) * rig.period + 1e-6)
+            if rig.yaw_rate() < math.radians(0.05) and rig.speed() < 0.002:
+                return kk + 1
+    raise SimulationError(f"vo-study: the rover did not come to rest by t = {max_k * rig.period} s")
+
+
+def run_rotation(*, config: VoStudyConfig, site, angle_deg: float, seed: int) -> dict:
+    """One rotation run: a pair at rest, a turn in place by ``angle_deg``, a pair at rest."""
+    from lunar_drake.perception.calibration import StereoCalibration
+    from lunar_drake.perception.stereo import StereoConfig
+    from lunar_drake.perception.vo import align, correction
+
+    s = _scenario_for(config, seed)
+    s.ground.route = _route(config, angle_deg)
+    s.simulation_duration = 1e6
+    calib = StereoCalibration.from_camera(camera=s.sensors.camera,
+                                          description=s.rover.description)  # fmt: skip
+    stereo = StereoConfig()
+    rig = _Rig(s, site)
+    c0 = rig.capture(3)  # the gimbal settled, before the first command arrives
+    if rig.yaw_rate() > math.radians(0.05) or rig.speed() > 0.002:
+        raise SimulationError("vo-study: the rover moved before the first pair")
+    turn_s = math.radians(angle_deg) / math.radians(config.turn_rate_dps)
+    if angle_deg > 0:
+        k1 = _wait_still(rig, 4, moving_from_k=4, max_k=int(40 + 3 * turn_s))
+    else:
+        k1 = 5
+    c1 = rig.capture(k1)
+    T_true = _relative(c0.X_WC, c1.X_WC)
+    T_odom = _relative(c0.X_WC_est, c1.X_WC_est)
+    p0 = _cloud(c0, calib=calib, stereo_config=stereo, max_range_m=config.max_range_m)
+    p1 = _cloud(c1, calib=calib, stereo_config=stereo, max_range_m=config.max_range_m)
+    al = align(p0[0], p1[0], init_T=T_odom, prev_intensity=p0[1], curr_intensity=p1[1])
+    _, rot = correction(np.eye(4), T_true)
+    return {
+        "angle_deg": float(angle_deg),
+        "seed": int(seed),
+        "vo_error_m": _translation_error(al.T_prev_curr, T_true),
+        "odom_error_m": _translation_error(T_odom, T_true),
+        "rejected": bool(al.rejected),
+        "reason": al.reason,
+        "true_rotation_deg": rot,
+        "true_translation_m": float(np.linalg.norm(T_true[:3, 3])),
+        "fitness": al.fitness,
+        "inlier_rmse_m": al.inlier_rmse_m,
+        "condition": al.condition,
+        "n_points_0": len(p0[0]),
+        "n_points_1": len(p1[0]),
+        "lights": bool(config.lights),
+    }
+
+
+def run_straight(*, config: VoStudyConfig, site, seed: int, progress=None) -> dict:
+    """One straight drive of ``config.straight_m`` with keyframe VO chained along it."""
+    from lunar_drake.perception.calibration import StereoCalibration
+    from lunar_drake.perception.stereo import StereoConfig
+    from lunar_drake.perception.vo import align
+
+    s = _scenario_for(config, seed)
+    s.ground.route = _route(config, 0.0)
+    s.simulation_duration = 1e6
+    calib = StereoCalibration.from_camera(camera=s.sensors.camera,
+                                          description=s.rover.description)  # fmt: skip
+    stereo = StereoConfig()
+    rig = _Rig(s, site)
+    k = 3
+    start = rig.capture(k)
+    key, key_cloud = start, _cloud(start, calib=calib, stereo_config=stereo,
+                                   max_range_m=config.max_range_m)  # fmt: skip
+    T_vo = np.eye(4)
+    links = rejected = 0
+    drive_s = config.straight_m / config.speed_mps
+    max_k = int(k + 40 + 3 * drive_s)
+    started = done = False
+    while not done:
+        k += 1
+        if k > max_k:
+            raise SimulationError(f"vo-study: the drive did not end by t = {max_k} s")
+        c = rig.capture(k)
+        moving = rig.speed() > 0.002
+        started = started or moving
+        done = started and not moving
+        step = np.linalg.norm(_relative(key.X_WC_est, c.X_WC_est)[:3, 3])
+        if step < config.keyframe_m and not done:
+            continue
+        cloud = _cloud(c, calib=calib, stereo_config=stereo, max_range_m=config.max_range_m)
+        T_odom = _relative(key.X_WC_est, c.X_WC_est)
+        al = align(key_cloud[0], cloud[0], init_T=T_odom, prev_intensity=key_cloud[1],
+                   curr_intensity=cloud[1])  # fmt: skip
+        links += 1
+        if al.rejected:
+            rejected += 1
+        T_vo = T_vo @ (T_odom if al.rejected else al.T_prev_curr)
+        key, key_cloud = c, cloud
+        if progress is not None:
+            progress(float(np.linalg.norm(_relative(start.X_WC, c.X_WC)[:3, 3])))
+    T_true = _relative(start.X_WC, key.X_WC)
+    T_odom = _relative(start.X_WC_est, key.X_WC_est)
+    dist = float(np.linalg.norm(T_true[:3, 3]))
+    return {
+        "seed": int(seed),
+        "distance_m": dist,
+        "vo_error_m": _translation_error(T_vo, T_true),
+        "odom_error_m": _translation_error(T_odom, T_true),
+        "links": links,
+        "rejected": rejected,
+        "lights": bool(config.lights),
+    }
+
+
+# ----------------------------------------------------------------------------------------
+# the study
+# ----------------------------------------------------------------------------------------
+def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True) -> dict:
+    """Runs the study and writes ``vo.csv`` + ``vo.png`` (rotation) or ``straight.json``
+    (straight) to ``out_dir``, with ``params.json``. Returns what was written."""
+    from lunar_drake.site import load_site
+
+    config.validate()
+    out_dir = ensure_output_dir(out_dir, what="--out directory")
+    base = _scenario_for(config, 0)
+    site = load_site(base, progress=progress)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+    params = {"config": dc.asdict(config), "method": __doc__.strip()}
+    if config.straight_m is not None:
+        runs = []
+        for seed in range(config.seeds):
+            if progress:
+                bar = tqdm(total=round(config.straight_m, 1), desc=f"straight seed {seed}",
+                           unit="m")  # fmt: skip
+
+                def tick(d, bar=bar):
+                    bar.n = round(min(d, config.straight_m), 1)
+                    bar.refresh()
+
+            runs.append(run_straight(config=config, site=site, seed=seed,
+                                     progress=tick if progress else None))  # fmt: skip
+            if bar is not None:
+                bar.close()
+        doc = {
+            "distance_m": float(np.mean([r["distance_m"] for r in runs])),
+            "vo_error_m": float(np.mean([r["vo_error_m"] for r in runs])),
+            "odom_error_m": float(np.mean([r["odom_error_m"] for r in runs])),
+            "vo_error_pct": float(np.mean([100 * r["vo_error_m"] / r["distance_m"] for r in runs])),
+            "odom_error_pct": float(
+                np.mean([100 * r["odom_error_m"] / r["distance_m"] for r in runs])
+            ),
+            "links": int(sum(r["links"] for r in runs)),
+            "rejected": int(sum(r["rejected"] for r in runs)),
+            "runs": runs,
+        }
+        atomic_write_text(out_dir / "straight.json", json.dumps(doc, indent=2) + "\n",
+                          what="straight.json")  # fmt: skip
+        atomic_write_text(out_dir / "params.json", json.dumps(params, indent=2) + "\n")
+        return doc
+    cases = [(a, s) for a in config.angles_deg for s in range(config.seeds)]
+    it = tqdm(cases, desc="vo study", unit="run") if progress else cases
+    rows = [run_rotation(config=config, site=site, angle_deg=a, seed=s) for a, s in it]
+    write_csv(out_dir / "vo.csv", rows)
+    plot_vo(rows, path=out_dir / "vo.png", lights=config.lights)
+    atomic_write_text(out_dir / "params.json", json.dumps(params, indent=2) + "\n")
+    return {"rows": rows, "summary": summarize(rows)}
+
+
+def write_csv(path: Path, rows) -> None:
+    """``vo.csv``: one row per run, :data:`CSV_COLUMNS`."""
+    with atomic_path(path, what="vo.csv") as tmp, open(tmp, "w") as f:
+        f.write(",".join(CSV_COLUMNS) + "\n")
+        for r in rows:
+            vals = []
+            for c in CSV_COLUMNS:
+                v = r[c]
+                if isinstance(v, bool):
+                    vals.append(str(int(v)))
+                elif isinstance(v, float):
+                    vals.append(f"{v:.6g}")
+                else:
+                    vals.append(str(v).replace(",", ";"))
+            f.write(",".join(vals) + "\n")
+
+
+def summarize(rows) -> list[dict]:
+    """Per angle: mean VO error (all runs and accepted ones), mean odometry error, how
+    many alignments were rejected, and how many bad ones (error above the odometry's)
+    were let through."""
+    out = []
+    for a in sorted({r["angle_deg"] for r in rows}):
+        rr = [r for r in rows if r["angle_deg"] == a]
+        acc = [r["vo_error_m"] for r in rr if not r["rejected"]]
+        bad = [r for r in rr if r["vo_error_m"] > r["odom_error_m"]]
+        out.append({
+            "angle_deg": a,
+            "runs": len(rr),
+            "vo_error_m": float(np.mean([r["vo_error_m"] for r in rr])),
+            "vo_accepted_error_m": float(np.mean(acc)) if acc else math.nan,
+            "odom_error_m": float(np.mean([r["odom_error_m"] for r in rr])),
+            "rejected": sum(r["rejected"] for r in rr),
+            "bad": len(bad),
+            "bad_accepted": sum(not r["rejected"] for r in bad),
+        })  # fmt: skip
+    return out
+
+
+def plot_vo(rows, *, path, lights: bool = False) -> None:
+    """``vo.png``: position error vs camera rotation, VO (each run; rejected hollow) and
+    fused odometry, with the per-angle means."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    summ = summarize(rows)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    a = np.array([r["angle_deg"] for r in rows])
+    vo = np.array([r["vo_error_m"] for r in rows])
+    od = np.array([r["odom_error_m"] for r in rows])
+    rej = np.array([r["rejected"] for r in rows], bool)
+    ax.scatter(a[~rej], 100 * vo[~rej], s=18, color="tab:blue", alpha=0.6, label="VO (run)")
+    ax.scatter(a[rej], 100 * vo[rej], s=24, facecolors="none", edgecolors="tab:blue",
+               label="VO (rejected)")  # fmt: skip
+    ax.scatter(a, 100 * od, s=18, color="tab:orange", alpha=0.6, marker="s",
+               label="wheel + IMU + star tracker (run)")  # fmt: skip
+    sa = [s["angle_deg"] for s in summ]
+    ax.plot(sa, [100 * s["vo_error_m"] for s in summ], color="tab:blue", label="VO mean")
+    ax.plot(sa, [100 * s["odom_error_m"] for s in summ], color="tab:orange",
+            label="odometry mean")  # fmt: skip
+    ax.set_xlabel("camera rotation between frames (deg)")
+    ax.set_ylabel("position error (cm)")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_title("Visual odometry vs fused odometry" + (" (headlights, shadow)" if lights else ""))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path, what="vo.png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
+__all__ = ["VoStudyConfig", "parse_angles", "plot_vo", "run_rotation", "run_straight",
+           "run_vo_study", "summarize", "write_csv"]  # fmt: skip

@@ -1,0 +1,235 @@
+"""The ground's perception step (perception/ground_pipeline.py) on stereo pairs rendered
+here in closed form (a plane and a hemispherical boulder, a world-anchored seeded
+texture seen by both cameras), and the operator's use of it (pose correction, replanning
+around a new hazard). References: scipy's rotations, hand-made transforms, the scene's
+own geometry."""
+
+import dataclasses as dc
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from lunar_drake.autonomy.costmap import HazardConfig, RoverEnvelope, build_costmap
+from lunar_drake.autonomy.operations import corrected_pose
+from lunar_drake.autonomy.planner import path_blocked
+from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, decode_frame, encode_frame
+from lunar_drake.errors import OutOfRangeError
+from lunar_drake.models.rover_description import krex2_rp
+from lunar_drake.perception.calibration import StereoCalibration
+from lunar_drake.perception.elevation_map import ElevationMap, PriorDem
+from lunar_drake.perception.ground_pipeline import (
+    PerceptionConfig,
+    PerceptionState,
+    _recentred,
+    fuse_translation,
+    perception_step,
+    planar_correction,
+    pose_matrix,
+)
+from lunar_drake.render.camera import CameraConfig
+
+W, H = 480, 360
+BOULDER = (6.0, 0.0, 0.35)  # centre x, y and radius of a hemisphere on z = 0 (m)
+ROVER = RoverEnvelope.of(krex2_rp())
+HAZ = HazardConfig(resolution_m=0.25)
+
+
+def _X_BC() -> np.ndarray:
+    """Left camera in the chassis: 1.3 m up, 0.4 m forward, looking +x pitched 20 deg
+    down (OpenCV axes: x right, y down, z forward)."""
+    p = math.radians(20.0)
+    z = np.array([math.cos(p), 0.0, -math.sin(p)])
+    x = np.array([0.0, -1.0, 0.0])
+    X = np.eye(4)
+    X[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    X[:3, 3] = (0.4, 0.15, 1.3)
+    return X
+
+
+def _texture():
+    g = np.random.default_rng(11)
+    grid = g.uniform(0.0, 1.0, (400, 400))  # 2.5 cm cells over 10 m, tiled
+
+    def tex(x, y):
+        u, v = (x / 0.025) % 400, (y / 0.025) % 400
+        i, j = np.floor(u).astype(int), np.floor(v).astype(int)
+        fu, fv = u - i, v - j
+        i1, j1 = (i + 1) % 400, (j + 1) % 400
+        return (grid[i, j] * (1 - fu) * (1 - fv) + grid[i1, j] * fu * (1 - fv)
+                + grid[i, j1] * (1 - fu) * fv + grid[i1, j1] * fu * fv)  # fmt: skip
+
+    return tex
+
+
+TEX = _texture()
+
+
+def _render(X_WC, calib) -> np.ndarray:
+    """12-bit frame of the scene from camera pose X_WC: the texture at each ray's first
+    hit (plane z = 0 or the boulder), sky 0."""
+    K = calib.K_left
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    d = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones_like(u)], -1)
+    d = d.reshape(-1, 3) @ X_WC[:3, :3].T
+    o = X_WC[:3, 3]
+    c = np.array((*BOULDER[:2], 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_plane = np.where(d[:, 2] < 0, -o[2] / d[:, 2], np.inf)
+        a = np.sum(d * d, axis=1)
+        b = 2.0 * d @ (o - c)
+        cc = (o - c) @ (o - c) - BOULDER[2] ** 2
+        disc = b * b - 4 * a * cc
+        t_s = np.where(disc >= 0, (-b - np.sqrt(np.maximum(disc, 0))) / (2 * a), np.inf)
+    t = np.minimum(t_plane, np.where(t_s > 0, t_s, np.inf))
+    hit = np.isfinite(t)
+    p = o + np.where(hit, t, 0.0)[:, None] * d
+    img = np.where(hit, 400.0 + 3000.0 * TEX(p[:, 0], p[:, 1]), 0.0)
+    return np.clip(img, 0, 4095).reshape(H, W).astype(np.uint16)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    calib = StereoCalibration.from_camera(
+        camera=CameraConfig(width=W, height=H, fov_y_deg=45.0), description=krex2_rp()
+    )
+    X_BC = _X_BC()
+    cfg = ImageDownlinkConfig(codec="png")
+    X_CR = np.eye(4)
+    X_CR[0, 3] = calib.baseline_m  # the right camera, +x of the left one
+
+    def frame(k, X_WB_true, pose_est, steady=10.0):
+        X_WC = X_WB_true @ X_BC
+        return StereoFrame(
+            frame_index=k, t_capture_s=float(k), codec="png",
+            left=encode_frame(_render(X_WC, calib), config=cfg),
+            right=encode_frame(_render(X_WC @ X_CR, calib), config=cfg),
+            pose_estimate=tuple(pose_est), pan_tilt_rad=(0.0, 0.0), gimbal_steady_s=steady,
+        )  # fmt: skip
+
+    z0 = np.zeros((160, 160))  # a flat 40 m prior at 0.25 m: the boulder is not on it
+    prior = build_costmap(z0, resolution_m=0.25, x0_m=-20.0, y1_m=20.0, rover=ROVER, config=HAZ)
+    return {
+        "calib": calib,
+        "frame": frame,
+        "prior": prior,
+        "dem": PriorDem(z=z0, resolution_m=0.25, x0_m=-20.0, y1_m=20.0),
+        "kw": dict(
+            calib=calib,
+            camera_in_chassis=lambda pan, tilt: X_BC,
+            decode=lambda buf: decode_frame(buf, codec="png"),
+            rover=ROVER,
+            hazards=HAZ,
+        ),
+    }
+
+
+def _pose6(x, y, yaw, z=0.3):
+    return (x, y, z, 0.0, 0.0, yaw)
+
+
+def test_pose_matrix_matches_scipy_zyx_euler():
+    pose = (1.0, -2.0, 0.5, 0.1, -0.2, 2.5)
+    X = pose_matrix(pose)
+    R = Rotation.from_euler("ZYX", [pose[5], pose[4], pose[3]]).as_matrix()
+    np.testing.assert_allclose(X[:3, :3], R, atol=1e-12)
+    np.testing.assert_allclose(X[:3, 3], pose[:3])
+
+
+def test_planar_correction_applied_to_a_pose_equals_the_matrix_product():
+    C = pose_matrix((0.7, -0.3, 0.0, 0.0, 0.0, 0.2))
+    pose = (3.0, 4.0, 0.1, 0.0, 0.0, 1.0)
+    out = corrected_pose(pose, planar_correction(C))
+    X = C @ pose_matrix(pose)
+    np.testing.assert_allclose(out[:2], X[:2, 3], atol=1e-12)
+    assert math.isclose(out[5], 1.2, abs_tol=1e-12)
+    assert tuple(corrected_pose(pose, (0.0, 0.0, 0.0))) == pose
+
+
+def test_fuse_translation_is_the_inverse_variance_mean():
+    t = fuse_translation([1.0, 0.0, 0.0], [1.3, 0.3, 0.0], sigma_odom_m=0.2, sigma_vo_m=0.1)
+    # weights 25 and 100: (25 * 1 + 100 * 1.3) / 125 = 1.24; (100 * 0.3) / 125 = 0.24
+    np.testing.assert_allclose(t, [1.24, 0.24, 0.0])
+
+
+def test_recentring_keeps_the_cells_of_the_overlap_in_place():
+    em = ElevationMap.empty(x0_m=0.0, y1_m=10.0, cell_m=0.1, shape=(100, 100))
+    r, c = em.cell_of(6.05, 4.05)
+    count = em.count.copy()
+    count[r, c] = 7
+    em = dc.replace(em, count=count)
+    assert _recentred(em, (5.0, 5.0), window_m=10.0, cell_m=0.1) is em
+    moved = _recentred(em, (8.0, 5.0), window_m=10.0, cell_m=0.1)
+    assert moved.x0_m == pytest.approx(3.0)
+    assert moved.count[moved.cell_of(6.05, 4.05)] == 7 and moved.count.sum() == 7
+
+
+def test_a_boulder_seen_in_stereo_becomes_lethal_and_blocks_the_path(scene):
+    st = PerceptionState(costmap=scene["prior"])
+    path = [(0.0, 0.0), (12.0, 0.0)]
+    assert not path_blocked(costmap=st.costmap, path_xy=path, from_xy=(0.0, 0.0))
+    f = scene["frame"](0, pose_matrix(_pose6(0.0, 0.0, 0.0)), _pose6(0.0, 0.0, 0.0))
+    st = perception_step(st, [(0, f)], prior=scene["dem"], config=PerceptionConfig(),
+                         **scene["kw"])  # fmt: skip
+    (rec,) = st.records.items()
+    assert rec.vo == "none" and rec.points > 10000 and rec.new_lethal > 0
+    assert st.version == 1
+    lethal = np.argwhere(st.costmap.lethal_raw)
+    x, y = st.costmap.centre_of(lethal[:, 0], lethal[:, 1])
+    d = np.hypot(x - BOULDER[0], y - BOULDER[1])
+    assert d.min() < BOULDER[2] and d.max() < BOULDER[2] + 0.5  # on the rock, not beside
+    assert path_blocked(costmap=st.costmap, path_xy=path, from_xy=(0.0, 0.0))
+    # the same path, seen from beyond the rock, is clear ahead
+    assert not path_blocked(costmap=st.costmap, path_xy=path, from_xy=(7.5, 0.0))
+
+
+def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_slips(scene):
+    """The rover really moved 0.8 m and turned 3 deg; the on-board estimate says 1.0 m
+    (slip it did not see). Fused with VO, the ground's pose lies much nearer the truth."""
+    true0, true1 = _pose6(0.0, 0.0, 0.0), _pose6(0.8, 0.0, math.radians(3.0))
+    est1 = _pose6(1.0, 0.0, math.radians(3.0))
+    frames = [
+        (0, scene["frame"](0, pose_matrix(true0), true0)),
+        (1, scene["frame"](1, pose_matrix(true1), est1)),
+    ]
+    cfg = PerceptionConfig(odom_sigma_fraction=0.05, vo_sigma_m=0.01, keyframe_m=0.5)
+    st = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                         config=cfg, **scene["kw"])  # fmt: skip
+    rec = st.records.items()[-1]
+    assert rec.vo == "accepted", rec.reason
+    ground = corrected_pose(est1, planar_correction(st.correction))
+    err_ground = math.hypot(ground[0] - 0.8, ground[1])
+    assert err_ground < 0.05 < 0.2 == pytest.approx(math.hypot(est1[0] - 0.8, est1[1]))
+    # without VO the ground keeps the on-board estimate
+    st2 = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                          config=dc.replace(cfg, use_vo=False), **scene["kw"])  # fmt: skip
+    assert st2.records.items()[-1].vo == "off"
+    np.testing.assert_allclose(planar_correction(st2.correction), 0.0, atol=1e-9)
+
+
+def test_frames_taken_while_the_gimbal_moved_or_without_a_header_are_skipped(scene):
+    pose = _pose6(0.0, 0.0, 0.0)
+    moving = scene["frame"](0, pose_matrix(pose), pose, steady=0.5)
+    blind = dc.replace(moving, gimbal_steady_s=10.0, pose_estimate=(math.nan,) * 6)
+    st = perception_step(PerceptionState(costmap=scene["prior"]), [(0, moving), (1, blind)],
+                         prior=scene["dem"], config=PerceptionConfig(), **scene["kw"])  # fmt: skip
+    assert st.last_seq == 1 and not st.records.items() and st.version == 0
+
+
+def test_frames_between_keyframes_are_skipped(scene):
+    p0, p1 = _pose6(0.0, 0.0, 0.0), _pose6(0.3, 0.0, 0.0)
+    frames = [(0, scene["frame"](0, pose_matrix(p0), p0)),
+              (1, scene["frame"](1, pose_matrix(p1), p1))]  # fmt: skip
+    st = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                         config=PerceptionConfig(keyframe_m=1.0), **scene["kw"])  # fmt: skip
+    assert [r.frame_index for r in st.records.items()] == [0]
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("keyframe_m", -1.0), ("window_m", 5.0), ("vo_sigma_m", 0.0), ("gimbal_settle_s", -1.0)],
+)
+def test_perception_config_errors_name_the_field(field, value):
+    with pytest.raises(OutOfRangeError, match=field):
+        dc.replace(PerceptionConfig(), **{field: value}).validate()
