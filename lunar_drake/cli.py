@@ -347,6 +347,7 @@ def _cmd_vo_study(args) -> int:
         height=args.height,
         turn_rate_dps=args.turn_rate,
         keyframe_m=args.keyframe,
+        spawn_radius_m=args.spawn_radius,
     )
     out = run_vo_study(config=config, out_dir=args.out, progress=not args.no_progress)
     if args.straight is not None:
@@ -474,6 +475,8 @@ def build_parser() -> argparse.ArgumentParser:
     vs.add_argument("--width", type=_positive_int, default=1024)
     vs.add_argument("--height", type=_positive_int, default=768)
     vs.add_argument("--turn-rate", type=_positive_float, default=5.0, help="deg/s of the turns")
+    vs.add_argument("--spawn-radius", type=float, default=10.0,
+                    help="seeds move the spawn within this radius of the scenario's (m)")  # fmt: skip
     vs.add_argument("--keyframe", type=_positive_float, default=1.0,
                     help="VO keyframe spacing on the straight drive (m)")  # fmt: skip
     vs.add_argument("--out", required=True)
