@@ -27,6 +27,7 @@ from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, ch
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
+from lunar_drake.render.regolith import RegolithTextureConfig
 from lunar_drake.render.shading import (
     Illumination,
     RasterSampler,
@@ -174,6 +175,9 @@ class TerrainCameraRenderer:
             resolution) or None (0.15 everywhere).
         model: CameraConfig (optics, sensor settings, engine). hapke: HapkeParams.
         dynamic_meshes: the rover's meshes (DynamicMesh, in their geometry frames).
+        texture: the sub-cell regolith texture (:class:`~lunar_drake.render.regolith.
+            RegolithTextureConfig`; None = the default, on with a fixed seed).
+        soft_shadows: smooth (quadratic B-spline) lightmap reconstruction.
     """
 
     def __init__(
@@ -184,6 +188,8 @@ class TerrainCameraRenderer:
         model: CameraConfig | None = None,
         hapke: hapke_mod.HapkeParams = hapke_mod.HIGHLANDS_643NM,
         dynamic_meshes=(),
+        texture: RegolithTextureConfig | None = None,
+        soft_shadows: bool = True,
     ):
         model = CameraConfig() if model is None else model
         model.validate()
@@ -203,7 +209,11 @@ class TerrainCameraRenderer:
                 end_deg=model.limb_blend_deg[1],
             )
         )
-        self._config = ShadingConfig(shadow_samples=model.shadow_samples)
+        self._config = ShadingConfig(
+            shadow_samples=model.shadow_samples,
+            texture=RegolithTextureConfig() if texture is None else texture,
+            soft_shadows=soft_shadows,
+        )
         self._normals = _normal_samplers(heightfield, max_px=model.normal_map_max_px)
         self._hapke = hapke
         self._fast = None

@@ -11,7 +11,9 @@ shading), built for frame rate on a few CPU cores:
 * **terrain shading** in one numba kernel per frame: normal map (+ wheel-track bump),
   albedo map, baked lightmap, Sun, indirect fill and Earthshine through a tabulated
   Hapke/Lunar-Lambert reflectance (:class:`~lunar_drake.render.hapke_lut.ReflectanceLUT`,
-  trilinear; accuracy in docs/lighting.md);
+  trilinear; accuracy in docs/lighting.md), with the sub-cell regolith texture
+  (:mod:`~lunar_drake.render.regolith`) and the B-spline lightmap
+  (:mod:`~lunar_drake.render.soft_shadow`) when the config asks for them;
 * the **soft rover shadow** (:func:`~lunar_drake.render.shading.rover_shadow_factor`,
   Embree) on the pixels the kernel's bounding-sphere cull keeps, rover pixels shaded by
   the reference :func:`~lunar_drake.render.shading.shade` (few pixels), spotlights by
@@ -42,6 +44,24 @@ from lunar_drake.render.raycast import (
     RayHits,
     TerrainRaycaster,
     camera_ray_directions,
+)
+from lunar_drake.render.regolith import (
+    P_ALB,
+    P_COS,
+    P_CS,
+    P_LAMBDA,
+    P_OU,
+    P_OV,
+    P_SIN,
+    P_SLOPE,
+    P_SS,
+    apply_texture,
+    build_texture,
+    inverse_footprint,
+    load_i32,
+    octave_weight,
+    sample_octave,
+    wrap_coordinates,
 )
 from lunar_drake.render.shading import (
     GBuffer,
@@ -125,9 +145,29 @@ def _tex3(a, p, x, y):
     w01 = (one - fr) * fc
     w10 = fr * (one - fc)
     w11 = fr * fc
-    o0 = w00 * a[r0, c0, 0] + w01 * a[r0, c1, 0] + w10 * a[r1, c0, 0] + w11 * a[r1, c1, 0]
-    o1 = w00 * a[r0, c0, 1] + w01 * a[r0, c1, 1] + w10 * a[r1, c0, 1] + w11 * a[r1, c1, 1]
-    o2 = w00 * a[r0, c0, 2] + w01 * a[r0, c1, 2] + w10 * a[r1, c0, 2] + w11 * a[r1, c1, 2]
+    # flat 32-bit indices into the C-contiguous texture (load_i32: 32-bit-index gathers)
+    k00 = np.int32((r0 * w + c0) * 3)
+    k01 = np.int32((r0 * w + c1) * 3)
+    k10 = np.int32((r1 * w + c0) * 3)
+    k11 = np.int32((r1 * w + c1) * 3)
+    o0 = (
+        w00 * load_i32(a, k00)
+        + w01 * load_i32(a, k01)
+        + w10 * load_i32(a, k10)
+        + w11 * load_i32(a, k11)
+    )
+    o1 = (
+        w00 * load_i32(a, k00 + 1)
+        + w01 * load_i32(a, k01 + 1)
+        + w10 * load_i32(a, k10 + 1)
+        + w11 * load_i32(a, k11 + 1)
+    )
+    o2 = (
+        w00 * load_i32(a, k00 + 2)
+        + w01 * load_i32(a, k01 + 2)
+        + w10 * load_i32(a, k10 + 2)
+        + w11 * load_i32(a, k11 + 2)
+    )
     return o0, o1, o2
 
 
@@ -145,11 +185,22 @@ def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out)
         out[j] = r
 
 
+@numba.njit(cache=True, fastmath=True, error_model="numpy")
+def _row_max(a, n):
+    """``max(a[:n])`` (a called function: fastmath lets the reduction vectorize; NaN-free
+    input)."""
+    m = a[0]
+    for j in range(n):
+        m = max(m, a[j])
+    return m
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _shade_terrain(
     t, R, fx, fy, cx, cy, skip, width, height, cam,
     surf, spar, afac_scale,
     lma, lpar, use_lm, gxa, gya, gpar, use_bump,
+    ttop, tbot, tpar, tperiod, tfade, use_tex, pix_ang, soft_lm,
     lut, ldirs, lirr, sun_light, sphere, sun_out, other_out, cand_out,
     rad_out, depth_out, label_out,
 ):  # fmt: skip
@@ -161,6 +212,9 @@ def _shade_terrain(
     simple loop the compiler schedules well, where one long per-pixel body stalled."""
     nl = ldirs.shape[0]
     m_e = lut.shape[1] - 1
+    n_oct = tpar.shape[0]
+    tsize = np.float32(math.sqrt(ttop.size))
+    tinv = np.float32(1.0) / tsize
     for row in numba.prange(height):
         col_of = np.empty(width, np.int64)
         D0 = np.empty(width, np.float32)
@@ -177,6 +231,20 @@ def _shade_terrain(
         SUN = np.zeros(width, np.float32)
         OTH = np.zeros(width, np.float32)
         TMP = np.empty(width, np.float32)
+        FT = np.empty(width, np.float32)
+        TT = np.empty(width, np.float32)
+        XW = np.empty(width, np.float32)
+        YW = np.empty(width, np.float32)
+        TA = np.empty(width, np.float32)
+        TX = np.empty(width, np.float32)
+        TY = np.empty(width, np.float32)
+        LC0 = np.empty(width, np.int64)
+        LC1 = np.empty(width, np.int64)
+        LC2 = np.empty(width, np.int64)
+        LR0 = np.empty(width, np.int64)
+        LR1 = np.empty(width, np.int64)
+        LR2 = np.empty(width, np.int64)
+        LO = np.empty(width, np.uint8)
         base = row * width
         n = 0
         for col in range(width):
@@ -194,6 +262,7 @@ def _shade_terrain(
             col = col_of[j]
             d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, col)
             ti = t[base + col]
+            TT[j] = ti
             D0[j] = d0
             D1[j] = d1
             D2[j] = d2
@@ -216,6 +285,49 @@ def _shade_terrain(
                     inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
                     NX[j] = bx * inv
                     NY[j] = by * inv
+        if use_tex and n > 0:  # sub-cell regolith texture (render/regolith.py)
+            one = np.float32(1.0)
+            for j in range(n):  # 1 / footprint = sqrt(cos_e) / (distance x pixel angle)
+                nx = NX[j]
+                ny = NY[j]
+                nz = np.float32(math.sqrt(min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)))
+                ce = max(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(0.05))
+                FT[j] = np.float32(math.sqrt(ce)) / (TT[j] * np.float32(pix_ang))
+                NZ[j] = nz
+                TA[j] = 0.0
+                TX[j] = 0.0
+                TY[j] = 0.0
+            for j in range(n):  # site coordinates wrapped to the texture's period
+                XW[j] = wrap_coordinates(X[j], tperiod)
+                YW[j] = wrap_coordinates(Y[j], tperiod)
+            imax = _row_max(FT, n)
+            for k in range(n_oct):
+                lamf = np.float32(tpar[k, P_LAMBDA] / tfade)
+                if lamf * imax <= one:  # this octave is off in the whole row
+                    continue
+                cs = np.float32(tpar[k, P_CS])
+                ss = np.float32(tpar[k, P_SS])
+                ou = np.float32(tpar[k, P_OU])
+                ov = np.float32(tpar[k, P_OV])
+                c = np.float32(tpar[k, P_COS])
+                sn = np.float32(tpar[k, P_SIN])
+                wa = np.float32(tpar[k, P_ALB])
+                ws = np.float32(tpar[k, P_SLOPE])
+                for j in range(n):
+                    w = octave_weight(lamf, FT[j])
+                    a, gu, gv = sample_octave(ttop, tbot, tsize, tinv, cs, ss, ou, ov, XW[j], YW[j])
+                    wsj = w * ws
+                    TA[j] += (w * wa) * a
+                    TX[j] += wsj * (c * gu + sn * gv)
+                    TY[j] += wsj * (c * gv - sn * gu)
+            for j in range(n):  # bump the normal, scale the albedo
+                rz = one / max(NZ[j], np.float32(1e-3))
+                bx = NX[j] * rz - TX[j]
+                by = NY[j] * rz - TY[j]
+                inv = one / np.float32(math.sqrt(bx * bx + by * by + one))
+                NX[j] = bx * inv
+                NY[j] = by * inv
+                AF[j] *= max(one + TA[j], np.float32(0.05))
         for j in range(n):  # nz and the emission axis of the table
             nx = NX[j]
             ny = NY[j]
@@ -237,7 +349,71 @@ def _shade_terrain(
             else:
                 for j in range(n):
                     OTH[j] += TMP[j]
-        if sun_light >= 0 and use_lm:
+        if sun_light >= 0 and use_lm and soft_lm:
+            # quadratic B-spline of the lightmap (render/soft_shadow.py) in two passes,
+            # cells and weights, then the nine taps (one loop: it vectorizes)
+            lh = lma.shape[0]
+            lw = lma.shape[1]
+            for j in range(n):
+                col = (X[j] - lpar[2]) * lpar[0] - 0.5
+                row_ = (lpar[3] - Y[j]) * lpar[1] - 0.5
+                out_ = (lpar[4] != 0.0) & (
+                    (row_ < -0.5) | (row_ > lh - 0.5) | (col < -0.5) | (col > lw - 0.5)
+                )
+                LO[j] = np.uint8(out_)
+                col = min(max(col, -0.5), lw - 0.5)
+                row_ = min(max(row_, -0.5), lh - 0.5)
+                fc = np.floor(col + 0.5)
+                fr = np.floor(row_ + 0.5)
+                tc = np.float32(col - fc)
+                tr = np.float32(row_ - fr)
+                ic = min(np.int64(fc), lw - 1)
+                ir = min(np.int64(fr), lh - 1)
+                LC0[j] = max(ic - 1, 0)
+                LC1[j] = ic
+                LC2[j] = min(ic + 1, lw - 1)
+                LR0[j] = max(ir - 1, 0) * lw
+                LR1[j] = ir * lw
+                LR2[j] = min(ir + 1, lh - 1) * lw
+                half = np.float32(0.5)
+                TA[j] = half * (half - tc) * (half - tc)
+                TX[j] = np.float32(0.75) - tc * tc
+                TY[j] = half * (half + tc) * (half + tc)
+                FT[j] = half * (half - tr) * (half - tr)
+                XW[j] = np.float32(0.75) - tr * tr
+                YW[j] = half * (half + tr) * (half + tr)
+            for j in range(n):
+                r0 = LR0[j]
+                r1 = LR1[j]
+                r2 = LR2[j]
+                c0 = LC0[j]
+                c1 = LC1[j]
+                c2 = LC2[j]
+                f = (
+                    FT[j]
+                    * (
+                        TA[j] * load_i32(lma, r0 + c0)
+                        + TX[j] * load_i32(lma, r0 + c1)
+                        + TY[j] * load_i32(lma, r0 + c2)
+                    )
+                    + XW[j]
+                    * (
+                        TA[j] * load_i32(lma, r1 + c0)
+                        + TX[j] * load_i32(lma, r1 + c1)
+                        + TY[j] * load_i32(lma, r1 + c2)
+                    )
+                    + YW[j]
+                    * (
+                        TA[j] * load_i32(lma, r2 + c0)
+                        + TX[j] * load_i32(lma, r2 + c1)
+                        + TY[j] * load_i32(lma, r2 + c2)
+                    )
+                )
+                TMP[j] = min(max(f, np.float32(0.0)), np.float32(1.0))
+            lout = np.float32(lpar[5])
+            for j in range(n):
+                SUN[j] *= TMP[j] + np.float32(LO[j]) * (lout - TMP[j])
+        elif sun_light >= 0 and use_lm:
             for j in range(n):
                 SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
         if sun_light >= 0 and sphere[4] > 0.0:
@@ -501,10 +677,14 @@ class FastTerrainEngine:
         rad = np.empty(n, np.float32)
         depth = np.empty(n, np.float32)
         label = np.empty(n, np.int16)
+        tex = build_texture(self.config.texture)
+        pix_ang = 1.0 / max(camera.fx, camera.fy)
         _shade_terrain(
             t, R, camera.fx, camera.fy, camera.cx, camera.cy, skip, W, H, cam,
             self.surface, self.surface_params, 1.0 / self.config.albedo_reference,
             lma, lpar, lightmap is not None, gxa, gya, gpar, track_depth is not None,
+            tex.top, tex.bottom, tex.params, tex.period, tex.fade, tex.enabled, pix_ang,
+            self.config.soft_shadows,
             self.lut.table, ldirs_a, lirr_a, sun_light, sphere, sun_t, other_t, cand,
             rad, depth, label,
         )  # fmt: skip
@@ -589,6 +769,11 @@ class FastTerrainEngine:
             if self.albedo is None
             else self.albedo(pos[0], pos[1]) * np.float32(1.0 / self.config.albedo_reference)
         )
+        tex = build_texture(self.config.texture)
+        if tex.enabled:  # as the kernel and the reference engine
+            ifoot = inverse_footprint(t[idx], gb.pixel_angle_rad, cos_e)
+            n_b, afac = apply_texture(tex, pos[0], pos[1], ifoot, n_b, afac)
+            cos_e = np.maximum((n_b * v).sum(axis=0), 0.0).astype(np.float32)
 
         def radiance_term(cos_i, cos_g, sel=None, fn=None):
             ce = cos_e if sel is None else cos_e[sel]

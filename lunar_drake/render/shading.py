@@ -65,6 +65,13 @@ from lunar_drake.render.raycast import (
     as_pose_matrix,
     camera_ray_directions,
 )
+from lunar_drake.render.regolith import (
+    RegolithTextureConfig,
+    apply_texture,
+    build_texture,
+    inverse_footprint,
+)
+from lunar_drake.render.soft_shadow import soft_lightmap
 
 __all__ = [
     "SUN_ANGULAR_RADIUS_RAD",
@@ -83,6 +90,8 @@ __all__ = [
     "sun_disk_directions",
     "trace",
 ]
+
+_NO_TEXTURE = RegolithTextureConfig(enabled=False)
 
 SUN_ANGULAR_RADIUS_RAD = math.radians(0.2666)
 """Mean apparent angular radius of the Sun at 1 au (959.6 arcsec, IAU nominal R_sun)."""
@@ -401,6 +410,15 @@ class ShadingConfig:
             :func:`rover_shadow_factor`). Under a low Sun penumbrae stretch by
             ``1 / cos_i`` and dominate the shading cost: lower this or
             ``shadow_samples`` to trade accuracy for speed.
+        texture: the sub-cell regolith texture on terrain pixels (albedo and bump
+            detail from 5 mm to 8 cm, band-limited by the pixel footprint;
+            :class:`~lunar_drake.render.regolith.RegolithTextureConfig`). Off here, so
+            :func:`shade` stays the plain BRDF model; the camera
+            (:class:`~lunar_drake.render.camera.TerrainCameraRenderer`) turns it on.
+        soft_shadows: a :class:`RasterSampler` lightmap is reconstructed smoothly
+            (quadratic B-spline, :mod:`lunar_drake.render.soft_shadow`) instead of
+            bilinearly, so sub-cell shadow edges do not staircase; other lightmap
+            callables are called as they are. Off here, on in the camera.
     """
 
     shadow_samples: int = 8
@@ -408,6 +426,8 @@ class ShadingConfig:
     albedo_reference: float = 0.15
     bump_step_m: float = 0.01
     max_penumbra_px: int = 16
+    texture: RegolithTextureConfig = field(default_factory=lambda: _NO_TEXTURE)
+    soft_shadows: bool = False
 
     def __post_init__(self) -> None:
         if not 1 <= int(self.shadow_samples) <= 64:
@@ -420,6 +440,10 @@ class ShadingConfig:
             raise OutOfRangeError(f"bump_step_m = {self.bump_step_m!r}; must be > 0 (m)")
         if not 1 <= int(self.max_penumbra_px) <= 256:
             raise OutOfRangeError(f"max_penumbra_px = {self.max_penumbra_px!r}; allowed 1..256")
+        if not isinstance(self.texture, RegolithTextureConfig):
+            raise ConfigError(f"texture = {self.texture!r} is invalid; a RegolithTextureConfig")
+        if not isinstance(self.soft_shadows, bool):
+            raise ConfigError(f"soft_shadows = {self.soft_shadows!r} is invalid; a bool")
 
 
 # ----------------------------------------------------------------------------------------
@@ -779,6 +803,15 @@ def shade(
     x, y = gb.position[0], gb.position[1]
     cos_e = _dot3(n, v)
     np.maximum(cos_e, np.float32(0.0), out=cos_e)
+    tex = build_texture(config.texture)
+    tsel = np.flatnonzero(gb.terrain) if tex.enabled else np.zeros(0, np.int64)
+    if tsel.size:
+        # sub-cell regolith texture: bump the terrain normals, scale the albedo below
+        ifoot = inverse_footprint(gb.per_hit(gb.hits.t_hit)[tsel], gb.pixel_angle_rad, cos_e[tsel])
+        n_t, tex_fac = apply_texture(tex, x[tsel], y[tsel], ifoot, n[:, tsel], None)
+        n = n.copy()
+        n[:, tsel] = n_t
+        cos_e[tsel] = np.maximum(_dot3(n_t, v[:, tsel]), np.float32(0.0))
 
     # material: regolith BRDF x albedo factor; Lambertian for dynamic meshes
     afac = None
@@ -791,6 +824,10 @@ def shade(
         else:
             a = np.asarray(albedo(x, y), dtype=np.float32)
         afac = a * np.float32(1.0 / config.albedo_reference)
+    if tsel.size:
+        if afac is None:
+            afac = np.ones(m, np.float32)
+        afac[tsel] *= tex_fac
     dyn_idx = np.flatnonzero(gb.dynamic)
     lam = None  # Lambertian f_r of dynamic-mesh pixels, (M,)
     if dyn_idx.size:
@@ -825,7 +862,10 @@ def shade(
             term = radiance_term(cos_i, _dot3(v, s))
             term *= np.float32(il.sun_irradiance)
             if lightmap is not None:
-                lm = np.clip(np.asarray(lightmap(x, y), np.float32), 0.0, 1.0)
+                if config.soft_shadows and isinstance(lightmap, RasterSampler):
+                    lm = soft_lightmap(lightmap, x, y)
+                else:
+                    lm = np.clip(np.asarray(lightmap(x, y), np.float32), 0.0, 1.0)
                 term *= lm
                 lit &= lm > 0
             if raycaster.dynamic_bounding_sphere() is not None:
