@@ -476,7 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     vs.add_argument("--height", type=_positive_int, default=768)
     vs.add_argument("--turn-rate", type=_positive_float, default=5.0, help="deg/s of the turns")
     vs.add_argument("--spawn-radius", type=float, default=10.0,
-                    help="seeds move the spawn within this radius of the scenario's (m)")  # fmt: skip
+                    help="seeds move the spawn this far from the scenario's (m)")  # fmt: skip
     vs.add_argument("--keyframe", type=_positive_float, default=1.0,
                     help="VO keyframe spacing on the straight drive (m)")  # fmt: skip
     vs.add_argument("--out", required=True)
