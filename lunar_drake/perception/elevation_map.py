@@ -91,6 +91,8 @@ class ElevationMapConfig:
             from its cell's median height in one cloud is dropped, > 0.
         outlier_min_m: the smallest such distance (m), >= 0.
         min_points: points a known cell holds at least, >= 1.
+        min_views: clouds a known cell was seen in at least, >= 1 (wrong stereo matches
+            come in patches that move with the view; rocks stay put).
         max_sigma_m: the largest height sigma of a known cell (m), > 0.
     """
 
@@ -104,6 +106,7 @@ class ElevationMapConfig:
     outlier_sigmas: float = 3.0
     outlier_min_m: float = 0.05
     min_points: int = 3
+    min_views: int = 1
     max_sigma_m: float = 0.05
 
     def validate(self) -> None:
@@ -122,6 +125,9 @@ class ElevationMapConfig:
         if isinstance(self.min_points, bool) or not isinstance(self.min_points, int | np.integer):
             raise ConfigError(f"min_points = {self.min_points!r} must be an integer")
         check_range("min_points", self.min_points, 1, 1_000_000)
+        if isinstance(self.min_views, bool) or not isinstance(self.min_views, int | np.integer):
+            raise ConfigError(f"min_views = {self.min_views!r} must be an integer")
+        check_range("min_views", self.min_views, 1, 1_000_000)
         check_range("max_sigma_m", self.max_sigma_m, 0.0, 100.0, lo_open=True, unit=" m")
 
     @classmethod
@@ -144,8 +150,8 @@ class ElevationMap:
     and north edges; ``cell_m``. Per cell (rows, cols), of the accepted points: ``weight``
     ``sum 1/sigma^2`` (1/m^2), ``weighted_z`` ``sum z/sigma^2`` (1/m), ``weighted_z2``
     ``sum z^2/sigma^2`` (-), ``count``, ``z_max_m`` the highest (m; -inf if none),
-    ``t_last_s`` the time of the last update (s; NaN if never). 48 bytes a cell: a
-    100 m x 100 m window at 0.1 m is 48 MB."""
+    ``t_last_s`` the time of the last update (s; NaN if never), ``views`` the clouds
+    that added points. 52 bytes a cell: a 100 m x 100 m window at 0.1 m is 52 MB."""
 
     weight: np.ndarray
     weighted_z: np.ndarray
@@ -153,6 +159,7 @@ class ElevationMap:
     count: np.ndarray
     z_max_m: np.ndarray
     t_last_s: np.ndarray
+    views: np.ndarray
     x0_m: float
     y1_m: float
     cell_m: float
@@ -170,7 +177,7 @@ class ElevationMap:
         return cls(
             weight=z, weighted_z=z.copy(), weighted_z2=z.copy(),
             count=np.zeros((rows, cols), np.int64), z_max_m=np.full((rows, cols), -np.inf),
-            t_last_s=np.full((rows, cols), np.nan),
+            t_last_s=np.full((rows, cols), np.nan), views=np.zeros((rows, cols), np.int32),
             x0_m=float(x0_m), y1_m=float(y1_m), cell_m=float(cell_m),
         )  # fmt: skip
 
@@ -217,8 +224,13 @@ class ElevationMap:
             return np.where(w > 0, np.maximum(red, 1.0) / w, np.inf)
 
     def known(self, config: ElevationMapConfig) -> np.ndarray:
-        """Cells with ``min_points`` points and a height sigma <= ``max_sigma_m``."""
-        return (self.count >= config.min_points) & (self.variance_m2 <= config.max_sigma_m**2)
+        """Cells with ``min_points`` points from ``min_views`` clouds and a height sigma
+        <= ``max_sigma_m``."""
+        return (
+            (self.count >= config.min_points)
+            & (self.views >= config.min_views)
+            & (self.variance_m2 <= config.max_sigma_m**2)
+        )
 
 
 def points_to_world(points_C, X_WC) -> np.ndarray:
@@ -262,7 +274,7 @@ def fuse(emap: ElevationMap, *, points_W, sensor_origin_W, config: ElevationMapC
     out = dc.replace(
         emap, weight=emap.weight.copy(), weighted_z=emap.weighted_z.copy(),
         weighted_z2=emap.weighted_z2.copy(), count=emap.count.copy(),
-        z_max_m=emap.z_max_m.copy(), t_last_s=emap.t_last_s.copy(),
+        z_max_m=emap.z_max_m.copy(), t_last_s=emap.t_last_s.copy(), views=emap.views.copy(),
     )  # fmt: skip
     if not ok.any():
         return out
@@ -295,6 +307,7 @@ def fuse(emap: ElevationMap, *, points_W, sensor_origin_W, config: ElevationMapC
     flat = out.z_max_m.reshape(-1)
     flat[cells] = np.maximum(flat[cells], zmax[hit])
     out.t_last_s.reshape(-1)[cells] = float(time_s)
+    out.views.reshape(-1)[cells] += 1
     return out
 
 

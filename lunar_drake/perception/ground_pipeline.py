@@ -16,11 +16,13 @@ the on-board pose estimate and the gimbal angles at capture):
   inverse-variance mean of the on-board translation (sigma ``odom_sigma_fraction`` x
   distance + ``odom_sigma_min_m``) and the VO translation (sigma ``vo_sigma_m``), the
   rotation the on-board one (star tracker: arcseconds). A rejected alignment leaves
-  the on-board motion. The ground's keyframe pose is the previous one composed with
-  the fused motion; ``correction`` (4 x 4) maps on-board poses to the ground's
-  (``X_W_ground = correction @ X_W_onboard``), applied to telemetry between keyframes.
-  This is a Kalman update of the relative motion with isotropic, constant-shape
-  covariances (no cross-correlations, no attitude update): an approximation.
+  the on-board motion, as does one further from the on-board step than
+  ``vo_gate_sigmas`` combined sigmas (innovation gate). The ground's keyframe pose is
+  the previous one composed with the fused motion; ``correction`` (4 x 4) maps on-board
+  poses to the ground's (``X_W_ground = correction @ X_W_onboard``), applied to
+  telemetry between keyframes. This is a Kalman update of the relative motion with
+  isotropic, constant-shape covariances (no cross-correlations, no attitude update): an
+  approximation.
 * **mapping**: the cloud, in the ground's estimated frame, fused into a local
   elevation map (:mod:`~lunar_drake.perception.elevation_map`, a ``window_m`` square
   re-centred on the rover when it nears an edge; what leaves it stays in the costmap);
@@ -68,6 +70,9 @@ class PerceptionConfig:
         odom_sigma_fraction, odom_sigma_min_m: on-board translation sigma between
             keyframes: fraction of the distance, plus a floor (m).
         vo_sigma_m: VO translation sigma per keyframe link (m).
+        vo_gate_sigmas: an accepted alignment whose translation differs from the
+            on-board one by more than this many combined sigmas is not fused (the
+            innovation gate; recorded as ``vo: gated``).
         stereo, vo, map: :class:`StereoConfig`, :class:`VoConfig`,
             :class:`ElevationMapConfig` (its ``focal_px`` and ``baseline_m`` are not
             read: they come from the rig's calibration).
@@ -85,9 +90,10 @@ class PerceptionConfig:
     odom_sigma_fraction: float = 0.02
     odom_sigma_min_m: float = 0.005
     vo_sigma_m: float = 0.02
+    vo_gate_sigmas: float = 3.0
     stereo: StereoConfig = dc.field(default_factory=StereoConfig)
-    vo: VoConfig = dc.field(default_factory=VoConfig)
-    map: ElevationMapConfig = dc.field(default_factory=ElevationMapConfig)
+    vo: VoConfig = dc.field(default_factory=lambda: VoConfig(max_rmse_m=0.08))
+    map: ElevationMapConfig = dc.field(default_factory=lambda: ElevationMapConfig(min_views=2))
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -101,6 +107,7 @@ class PerceptionConfig:
         check_range("odom_sigma_fraction", self.odom_sigma_fraction, 0.0, 1.0)
         check_range("odom_sigma_min_m", self.odom_sigma_min_m, 1e-6, 10.0, unit=" m")
         check_range("vo_sigma_m", self.vo_sigma_m, 1e-6, 10.0, unit=" m")
+        check_range("vo_gate_sigmas", self.vo_gate_sigmas, 0.0, 1e6, lo_open=True)
         self.stereo.validate()
         self.vo.validate()
         self.map.validate()
@@ -110,7 +117,8 @@ class PerceptionConfig:
 class KeyframeRecord:
     """One processed keyframe: capture time ``t_capture_s``, ``frame_index``, stereo
     points kept, VO outcome (``vo``: ``none`` first keyframe / ``accepted`` /
-    ``rejected`` / ``off``, ``reason``, ``fitness``, ``inlier_rmse_m``, ``condition``),
+    ``rejected`` (by its own quality) / ``gated`` (too far from the on-board step) /
+    ``off``, ``reason``, ``fitness``, ``inlier_rmse_m``, ``condition``),
     the on-board and VO translations between keyframes (m) and how far they differ
     (``vo_minus_odom_m``), the ground's pose (x, y, yaw; m, rad) and the lethal cells the
     map added (``new_lethal``)."""
@@ -281,11 +289,14 @@ def perception_step(
                 fit, rmse, cond, reason = al.fitness, al.inlier_rmse_m, al.condition, al.reason
                 vo_step = float(np.linalg.norm(al.T_prev_curr[:3, 3]))
                 diff = float(np.linalg.norm(al.T_prev_curr[:3, 3] - T_odom[:3, 3]))
+                sig_o = config.odom_sigma_fraction * odom_step + config.odom_sigma_min_m
+                gate = config.vo_gate_sigmas * math.hypot(sig_o, config.vo_sigma_m)
                 if al.rejected:
                     vo = "rejected"
+                elif diff > gate:
+                    vo, reason = "gated", f"{diff:.3f} m from the on-board step > {gate:.3f} m"
                 else:
                     vo = "accepted"
-                    sig_o = config.odom_sigma_fraction * odom_step + config.odom_sigma_min_m
                     T[:3, 3] = fuse_translation(T_odom[:3, 3], al.T_prev_curr[:3, 3],
                                                 sigma_odom_m=sig_o,
                                                 sigma_vo_m=config.vo_sigma_m)  # fmt: skip

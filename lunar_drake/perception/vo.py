@@ -68,7 +68,7 @@ class VoConfig:
 
     method: str = "colored"
     voxel_m: float = 0.025
-    levels: int = 3
+    levels: int = 2
     correspondence_voxels: float = 2.0
     lambda_geometric: float = 0.968
     max_correspondence_m: float = 0.2

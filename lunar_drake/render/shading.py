@@ -236,15 +236,22 @@ class RasterSampler:
         """``(d/dx, d/dy)`` (units per m, x east, y north): bilinear interpolation of the
         central-difference gradient at the pixel centres (0 outside with ``outside``)."""
         if self._grad is None:
-            v = self.values.astype(np.float64)
+            # np.gradient's differences (central inside, one-sided at the edges) in
+            # float32: the wheel-track window is millions of cells, rebuilt every frame.
+            v = np.asarray(self.values, np.float32)
             h, w = v.shape
             gx = np.zeros_like(v)
             gy = np.zeros_like(v)
+            sx, sy = np.float32(self._sx), np.float32(self._sy)
             if w > 1:
-                gx = np.gradient(v, axis=1) * self._sx
-            if h > 1:
-                gy = -np.gradient(v, axis=0) * self._sy  # row index grows southwards
-            self._grad = (gx.astype(np.float32), gy.astype(np.float32))
+                np.multiply(v[:, 2:] - v[:, :-2], np.float32(0.5) * sx, out=gx[:, 1:-1])
+                gx[:, 0] = (v[:, 1] - v[:, 0]) * sx
+                gx[:, -1] = (v[:, -1] - v[:, -2]) * sx
+            if h > 1:  # row index grows southwards
+                np.multiply(v[:-2] - v[2:], np.float32(0.5) * sy, out=gy[1:-1])
+                gy[0] = (v[0] - v[1]) * sy
+                gy[-1] = (v[-2] - v[-1]) * sy
+            self._grad = (gx, gy)
         row, col = self._rc(x, y)
         o = None if self.outside is None else 0.0
         return _bilinear(self._grad[0], row, col, o), _bilinear(self._grad[1], row, col, o)
