@@ -179,6 +179,11 @@ def test_a_boulder_seen_in_stereo_becomes_lethal_and_blocks_the_path(scene):
     f1 = scene["frame"](1, pose_matrix(p1), p1)
     st = perception_step(st, [(1, f1)], prior=scene["dem"], config=PerceptionConfig(),
                          **scene["kw"])  # fmt: skip
+    assert st.version == 0  # twice: still not (min_views = 3)
+    p2 = _pose6(2.4, 0.0, 0.0)
+    f2 = scene["frame"](2, pose_matrix(p2), p2)
+    st = perception_step(st, [(2, f2)], prior=scene["dem"], config=PerceptionConfig(),
+                         **scene["kw"])  # fmt: skip
     rec = st.records.items()[-1]
     assert rec.vo == "accepted", rec.reason
     assert rec.new_lethal > 0 and st.version == 1

@@ -121,3 +121,19 @@ def test_the_stretch_is_shared_and_bad_input_is_refused(calib):
         StereoConfig(mode="bm").validate()
     with pytest.raises(OutOfRangeError, match="min_depth_m"):
         StereoConfig(min_depth_m=0.0).validate()
+
+
+def test_deep_shadow_is_not_matched(calib):
+    """The lower half of the view 500 times darker (a shadow lit by Earthshine): below
+    min_signal of the stretch's high code it gives no points; with min_signal 0 it does."""
+    d_true = calib.focal_px * calib.baseline_m / 4.0
+    left, right, _ = _pair(calib, lambda v: np.full_like(v, d_true))
+    dark = np.ones(left.shape)
+    dark[120:] = 0.002
+    left = (left * dark).astype(np.uint16)
+    right = (right * dark).astype(np.uint16)
+    res = match(left, right, calib=calib, config=StereoConfig())
+    n = res.num_disparities
+    assert res.valid[:110, n:].mean() > 0.8 and not res.valid[125:].any()
+    res0 = match(left, right, calib=calib, config=StereoConfig(min_signal=0.0))
+    assert res0.valid[125:].any()

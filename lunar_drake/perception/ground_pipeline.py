@@ -93,7 +93,7 @@ class PerceptionConfig:
     vo_gate_sigmas: float = 3.0
     stereo: StereoConfig = dc.field(default_factory=StereoConfig)
     vo: VoConfig = dc.field(default_factory=lambda: VoConfig(max_rmse_m=0.08))
-    map: ElevationMapConfig = dc.field(default_factory=lambda: ElevationMapConfig(min_views=2))
+    map: ElevationMapConfig = dc.field(default_factory=lambda: ElevationMapConfig(min_views=3))
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -315,7 +315,9 @@ def perception_step(
                           cell_m=map_cfg.cell_m)  # fmt: skip
         emap = fuse(emap, points_W=p_W, sensor_origin_W=X_WC_ground[:3, 3], config=map_cfg,
                     time_s=frame.t_capture_s)  # fmt: skip
-        haz = stereo_hazards(emap, hazards=hazards, rover=rover, config=map_cfg, prior=prior)
+        # Unknown cells filled from the nearest known one, not the prior: the orbital
+        # DEM differs from stereo by more than a step at the edges of what was seen.
+        haz = stereo_hazards(emap, hazards=hazards, rover=rover, config=map_cfg)
         before = int(np.count_nonzero(s.costmap.lethal_raw))
         costmap = merge_into_costmap(s.costmap, stereo=haz, rover=rover, hazards=hazards)
         new_lethal = int(np.count_nonzero(costmap.lethal_raw)) - before

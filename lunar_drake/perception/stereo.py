@@ -45,6 +45,9 @@ class StereoConfig:
         pre_filter_cap: clip of the prefiltered image derivative.
         mode: ``sgbm`` (5 directions), ``hh`` (8 directions, full), ``3way``.
         low_percentile, high_percentile: the 8-bit stretch (percent of codes).
+        min_signal: pixels of the left frame darker than this fraction of the stretch's
+            high code are not matched (deep shadow: noise, wrong disparities that agree
+            from one frame to the next); 0 keeps them.
     """
 
     min_depth_m: float = 1.5
@@ -57,6 +60,7 @@ class StereoConfig:
     mode: str = "sgbm"
     low_percentile: float = 0.5
     high_percentile: float = 99.5
+    min_signal: float = 0.02
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -73,6 +77,7 @@ class StereoConfig:
             raise ConfigError(f"mode = {self.mode!r} is unknown; choose one of {MODES}")
         check_range("low_percentile", self.low_percentile, 0.0, 50.0)
         check_range("high_percentile", self.high_percentile, 50.0, 100.0)
+        check_range("min_signal", self.min_signal, 0.0, 1.0)
 
 
 @dc.dataclass(frozen=True)
@@ -106,12 +111,20 @@ class StereoResult:
         return self.left_8bit[self.valid].astype(np.float64) / 255.0
 
 
-def to_8bit(left, right, *, low_percentile: float, high_percentile: float):
-    """Both frames mapped to uint8 by one linear stretch (see the module docstring)."""
+def stretch_limits(left, right, *, low_percentile: float, high_percentile: float):
+    """(low, high) codes of the shared 8-bit stretch of both frames."""
+    both = np.concatenate([np.asarray(left).ravel(), np.asarray(right).ravel()])
+    lo, hi = np.percentile(both, [low_percentile, high_percentile])
+    return float(lo), float(hi)
+
+
+def to_8bit(left, right, *, low_percentile: float, high_percentile: float, limits=None):
+    """Both frames mapped to uint8 by one linear stretch (see the module docstring);
+    ``limits`` (low, high) if already known."""
     a = np.asarray(left, np.float64)
     b = np.asarray(right, np.float64)
-    both = np.concatenate([a.ravel(), b.ravel()])
-    lo, hi = np.percentile(both, [low_percentile, high_percentile])
+    lo, hi = limits or stretch_limits(a, b, low_percentile=low_percentile,
+                                      high_percentile=high_percentile)  # fmt: skip
     scale = 255.0 / max(hi - lo, 1.0)
 
     def conv(x):
@@ -139,8 +152,10 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
             f"frames {L.shape} and {Rr.shape} do not match the calibration's "
             f"{calib.height} x {calib.width} px"
         )
+    limits = stretch_limits(L, Rr, low_percentile=config.low_percentile,
+                            high_percentile=config.high_percentile)  # fmt: skip
     l8, r8 = to_8bit(L, Rr, low_percentile=config.low_percentile,
-                     high_percentile=config.high_percentile)  # fmt: skip
+                     high_percentile=config.high_percentile, limits=limits)  # fmt: skip
     (m1x, m1y), (m2x, m2y), Q = calib.rectification()
     l8 = cv2.remap(l8, m1x, m1y, cv2.INTER_LINEAR)
     r8 = cv2.remap(r8, m2x, m2y, cv2.INTER_LINEAR)
@@ -158,6 +173,9 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
     disp = raw.astype(np.float32) / 16.0
     valid = raw > 0
     valid[:, :n] = False  # no match possible at the left border
+    if config.min_signal > 0.0:  # deep shadow: too little light to match
+        left_rect = cv2.remap(L.astype(np.float32), m1x, m1y, cv2.INTER_LINEAR)
+        valid &= left_rect >= config.min_signal * limits[1]
     disp = np.where(valid, disp, np.nan).astype(np.float32)
     # Through the rectification's Q (the rectified camera, whatever the rig):
     # [X Y Z W] = Q [u v d 1], points (X, Y, Z) / W.
@@ -197,5 +215,6 @@ __all__ = [
     "depth_error",
     "match",
     "num_disparities_for",
+    "stretch_limits",
     "to_8bit",
 ]
