@@ -420,3 +420,21 @@ def test_end_to_end_a_matched_stereo_pair_makes_the_boulder_lethal(boulder):
     after = plan_path(costmap=merged, start_xy=(-4.0, 0.0), goal_xy=(4.5, 0.0))
     gap = _dist_to_boulder(merged, after.cells[:, 0], after.cells[:, 1]).min()
     assert gap > BOULDER_R + ROVER.footprint_radius_m
+
+
+def test_a_coarse_costmap_is_refined_with_its_lethal_cells_in_place():
+    from lunar_drake.perception.elevation_map import refined_costmap
+
+    z = np.zeros((20, 20))
+    z[10, 10] = 1.0  # a 1 m spike: lethal at 1 m cells
+    coarse = build_costmap(z, resolution_m=1.0, x0_m=0.0, y1_m=20.0, rover=ROVER,
+                           config=HazardConfig(resolution_m=1.0))  # fmt: skip
+    fine = refined_costmap(coarse, resolution_m=0.5, rover=ROVER, hazards=HazardConfig())
+    assert fine.resolution_m == 0.5 and fine.shape == (40, 40)
+    np.testing.assert_array_equal(fine.lethal_raw[::2, ::2], coarse.lethal_raw)
+    # every cell whose centre is within the footprint radius + inflation of a lethal one
+    lr, lc = np.nonzero(fine.lethal_raw)
+    rr, cc = np.mgrid[0:40, 0:40]
+    d = np.min(np.hypot(rr[..., None] - lr, cc[..., None] - lc), axis=-1) * 0.5
+    np.testing.assert_array_equal(np.isinf(fine.cost), d <= ROVER.footprint_radius_m + 0.2)
+    assert refined_costmap(fine, resolution_m=0.5, rover=ROVER, hazards=HazardConfig()) is fine

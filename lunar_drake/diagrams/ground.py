@@ -165,12 +165,19 @@ def command_preview(scenario: Scenario, *, prior_dem=None):
 
 def ground_perception(scenario: Scenario, *, costmap, prior_dem) -> GroundPerception:
     """The ground's stereo / VO / mapping system (``ground.perception``) over the
-    a-priori ``costmap``: the rig calibration from the camera model and the rover's
-    kinematics (what operations know of the rover)."""
+    a-priori ``costmap`` (refined to ``ground.hazards.resolution_m``): the rig
+    calibration from the camera model and the rover's kinematics (what operations know
+    of the rover)."""
     from lunar_drake.autonomy.costmap import RoverEnvelope
     from lunar_drake.perception.calibration import StereoCalibration
+    from lunar_drake.perception.elevation_map import refined_costmap
 
     d = scenario.rover.description
+    haz = scenario.ground.hazards
+    # Stereo hazards go onto the hazard grid (ground.hazards.resolution_m), not the
+    # coarser orbital one.
+    costmap = refined_costmap(costmap, resolution_m=haz.resolution_m,
+                              rover=RoverEnvelope.of(d), hazards=haz)  # fmt: skip
     return GroundPerception(
         config=scenario.ground.perception,
         rate_hz=scenario.ground.rate_hz,

@@ -390,6 +390,21 @@ def _prior_on(emap: ElevationMap, prior: PriorDem) -> np.ndarray:
     return prior.sample(x, y)
 
 
+def refined_costmap(costmap: Costmap, *, resolution_m: float, rover: RoverEnvelope,
+                    hazards: HazardConfig) -> Costmap:
+    """``costmap`` on a grid refined by the whole factor that brings its cells to at most
+    ``resolution_m`` (its layers repeated, lethal cells re-inflated at the finer
+    resolution): a 1 m orbital grid cannot place a rover-scale rock found by stereo
+    without blocking a metre round it. Unchanged if already fine enough."""
+    k = max(1, math.ceil(costmap.resolution_m / resolution_m - 1e-9))
+    if k == 1:
+        return costmap
+    none = np.zeros((1, 1))
+    empty = StereoHazards(none, none, none, np.zeros((1, 1), bool), np.zeros((1, 1), bool),
+                          none, costmap.x0_m, costmap.y1_m, costmap.resolution_m)  # fmt: skip
+    return merge_into_costmap(costmap, stereo=empty, rover=rover, hazards=hazards, upsample=k)
+
+
 def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverEnvelope,
                        hazards: HazardConfig, upsample: int = 1, stereo_clears: bool = False,
                        clear_coverage: float = 0.9) -> Costmap:  # fmt: skip
@@ -453,5 +468,6 @@ __all__ = [
     "fuse",
     "merge_into_costmap",
     "points_to_world",
+    "refined_costmap",
     "stereo_hazards",
 ]
