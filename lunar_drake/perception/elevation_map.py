@@ -390,8 +390,9 @@ def _prior_on(emap: ElevationMap, prior: PriorDem) -> np.ndarray:
     return prior.sample(x, y)
 
 
-def refined_costmap(costmap: Costmap, *, resolution_m: float, rover: RoverEnvelope,
-                    hazards: HazardConfig) -> Costmap:
+def refined_costmap(
+    costmap: Costmap, *, resolution_m: float, rover: RoverEnvelope, hazards: HazardConfig
+) -> Costmap:
     """``costmap`` on a grid refined by the whole factor that brings its cells to at most
     ``resolution_m`` (its layers repeated, lethal cells re-inflated at the finer
     resolution): a 1 m orbital grid cannot place a rover-scale rock found by stereo
