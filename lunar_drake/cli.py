@@ -182,7 +182,14 @@ def _cmd_run(args) -> int:
             f"Images: the ground received {_plural(summary['images_received'], 'stereo frame')}"
             f" ({summary['images_bytes_received'] / 1e6:.1f} MB)"
         )
+    per = summary.get("perception") or {}
+    if per.get("keyframes"):
+        vo = ", ".join(f"{n} {k}" for k, n in per["vo"].items())
+        print(f"Perception: {_plural(per['keyframes'], 'stereo keyframe')} (VO: {vo}); "
+              f"{per['lethal_cells_added']} lethal cells added to the ground's map")  # fmt: skip
     files = outputs.run_files()
+    if per.get("keyframes"):
+        files.append("keyframes.csv")
     if scenario.sensors.camera.enabled:
         files.append("calibration.yaml")
     if summary["camera_frames"]:

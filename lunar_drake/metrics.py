@@ -255,6 +255,18 @@ def ground(logs: SimulationLogs) -> dict:
     }
 
 
+def _perception(keyframes) -> dict:
+    """The ground perception's keyframes: how many, VO outcomes, lethal cells added."""
+    vo = {}
+    for k in keyframes:
+        vo[k.vo] = vo.get(k.vo, 0) + 1
+    return {
+        "keyframes": len(keyframes),
+        "vo": dict(sorted(vo.items())),
+        "lethal_cells_added": int(sum(k.new_lethal for k in keyframes)),
+    }
+
+
 def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
     """The deterministic summary of a run (``summary.json``)."""
     tel = logs.telemetry
@@ -278,6 +290,7 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "telemetry_received": len(tel.seq),
         "images_received": len(logs.images_received),
         "images_bytes_received": int(sum(r[4] for r in logs.images_received)),
+        "perception": _perception(logs.keyframes),
         "camera_frames": int(logs.frames_written),
     }
     return summary
