@@ -10,7 +10,8 @@ reachable on the *true* costmap (the site DEM with rocks). Each goal is its own 
 (the scenario with ``ground.goals: [goal]``, the ground's map ``--map``, cameras off;
 with ``--stereo`` the cameras on, frames sent down and the ground's stereo perception
 mapping hazards into its costmap and replanning,
-time for three times the straight-line distance at the drive speed plus two minutes),
+time for three times the straight-line distance at the drive speed plus two minutes,
+ending 20 s after the ground has judged the goal reached or failed),
 written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
 mean_drift_pct, rtt_s, map`` and ``runs`` (``goal_xy, reached, strikes, final_error_m,
 distance_m, drift_pct, run_dir``; a goal the ground could not plan to on its map is
@@ -88,7 +89,8 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str 
     site = load_site(s, progress=False)
     row = {"goal_xy": list(goal), "run_dir": run_dir}
     try:
-        logs = simulate(scenario=s, site=site, progress=False)
+        # ends 20 s after the ground judged its goal (the rover is braked by then)
+        logs = simulate(scenario=s, site=site, progress=False, stop_after_goals_s=20.0)
     except LunarDrakeError as exc:  # the ground could not plan to it on its map
         return {**row, "reached": False, "strikes": 0, "error": f"{type(exc).__name__}: {exc}"}
     summary = metrics.summarize(scenario=s, site=site, logs=logs)

@@ -144,26 +144,34 @@ def main(argv=None) -> int:
 
 
 def _vo(scen, site, yaw, step, calib, config, res0, X_WC0) -> dict:
-    """ICP between the pair at the spawn and one ``step`` m ahead (points within 10 m),
-    from the true camera motion perturbed by 5 cm and 1 deg (an on-board guess)."""
+    """ICP between the pair at the spawn and one ``step`` m ahead with the ground's VO
+    (``PerceptionConfig``: points within its ``max_range_m``, the attitude prior, the
+    overlap), from the true camera motion perturbed as an on-board guess would be: 5 cm
+    sideways and 0.02 deg (the star tracker's attitude; the EKF's measured error over
+    vo-study's motions is 0.001-0.05 deg)."""
+    from lunar_drake.perception.ground_pipeline import PerceptionConfig
     from lunar_drake.perception.stereo import match
-    from lunar_drake.perception.vo import align, correction
+    from lunar_drake.perception.vo import ViewFrustum, align, correction
 
     left, right, _, _, X_WC1 = render_pair(scen, site, yaw_deg=yaw, forward_m=step)
     res1 = match(left, right, calib=calib, config=config)
+    ground = PerceptionConfig()
 
     def near(r):
         c, g = r.cloud(), r.cloud_intensity()
-        return c[c[:, 2] <= 10.0], g[c[:, 2] <= 10.0]
+        keep = c[:, 2] <= ground.max_range_m
+        return c[keep], g[keep]
 
     T_true = np.linalg.inv(X_WC0) @ X_WC1
     guess = T_true.copy()
-    c, s_ = math.cos(math.radians(1.0)), math.sin(math.radians(1.0))
+    c, s_ = math.cos(math.radians(0.02)), math.sin(math.radians(0.02))
     guess[:3, :3] = guess[:3, :3] @ np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]])
     guess[:3, 3] += [0.05, 0.0, 0.0]
     t0 = time.perf_counter()
     (p0, g0), (p1, g1) = near(res0), near(res1)
-    al = align(p0, p1, init_T=guess, prev_intensity=g0, curr_intensity=g1)
+    frustum = ViewFrustum.from_calibration(calib, max_range_m=ground.max_range_m)
+    al = align(p0, p1, init_T=guess, prev_intensity=g0, curr_intensity=g1, config=ground.vo,
+               frustum=frustum)  # fmt: skip
     dt, dr = correction(T_true, al.T_prev_curr)
     g_dt, g_dr = correction(T_true, guess)
     return {"step_m": step, "vo_error_m": dt, "vo_error_deg": dr, "guess_error_m": g_dt,

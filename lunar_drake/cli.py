@@ -355,6 +355,10 @@ def _cmd_vo_study(args) -> int:
         turn_rate_dps=args.turn_rate,
         keyframe_m=args.keyframe,
         spawn_radius_m=args.spawn_radius,
+        fov_y_deg=args.fov,
+        max_range_m=args.max_range,
+        calibrate_turns=not args.commanded_turns,
+        images=args.images,
     )
     out = run_vo_study(config=config, out_dir=args.out, progress=not args.no_progress)
     if args.straight is not None:
@@ -367,11 +371,13 @@ def _cmd_vo_study(args) -> int:
                   f"{r['rejected']:>4}/{r['links']:<4}")  # fmt: skip
         print(f"Outputs: {Path(args.out).resolve()} (straight.json, params.json)")
         return 0
-    print(f"{'angle':>6} {'runs':>5} {'VO cm':>8} {'VO acc. cm':>11} {'odom cm':>8} "
-          f"{'rejected':>9} {'bad':>4} {'bad kept':>9}")  # fmt: skip
+    print(f"{'angle':>6} {'turned':>7} {'runs':>5} {'VO cm':>8} {'VO acc. cm':>11} "
+          f"{'VO used cm':>11} {'odom cm':>8} {'rejected':>9} {'bad':>4} "
+          f"{'bad kept':>9}")  # fmt: skip
     for r in out["summary"]:
-        print(f"{r['angle_deg']:6.1f} {r['runs']:5d} {100 * r['vo_error_m']:8.2f} "
-              f"{100 * r['vo_accepted_error_m']:11.2f} {100 * r['odom_error_m']:8.2f} "
+        print(f"{r['angle_deg']:6.1f} {r['true_rotation_deg']:7.1f} {r['runs']:5d} "
+              f"{100 * r['vo_error_m']:8.2f} {100 * r['vo_accepted_error_m']:11.2f} "
+              f"{100 * r['used_error_m']:11.2f} {100 * r['odom_error_m']:8.2f} "
               f"{r['rejected']:9d} {r['bad']:4d} {r['bad_accepted']:9d}")  # fmt: skip
     print(f"Outputs: {Path(args.out).resolve()} (vo.csv, vo.png, params.json)")
     return 0
@@ -486,6 +492,22 @@ def build_parser() -> argparse.ArgumentParser:
                     help="seeds move the spawn this far from the scenario's (m)")  # fmt: skip
     vs.add_argument("--keyframe", type=_positive_float, default=1.0,
                     help="VO keyframe spacing on the straight drive (m)")  # fmt: skip
+    vs.add_argument("--fov", type=_positive_float, default=None, metavar="DEG",
+                    help="the mast cameras' vertical field of view (deg; default: the "
+                         "scenario's), for the lens trade")  # fmt: skip
+    vs.add_argument("--max-range", type=_positive_float, default=None, metavar="M",
+                    help="stereo points aligned out to this depth (m; default: the "
+                         "scenario's ground.perception.max_range_m)")  # fmt: skip
+    vs.add_argument(
+        "--images",
+        action="store_true",
+        help="write each turn's two stereo pairs (left + disparity) to DIR/images",
+    )
+    vs.add_argument(
+        "--commanded-turns",
+        action="store_true",
+        help="turn by the commanded angle, not lengthened to the angle asked for",
+    )
     vs.add_argument("--out", required=True)
     vs.add_argument("--no-progress", action="store_true")
     vs.set_defaults(func=_cmd_vo_study)

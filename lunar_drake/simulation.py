@@ -148,12 +148,15 @@ def simulate(
     frames_dir: str | Path | None = None,
     stop_when: StopCheck | None = None,
     stop_check_period_s: float = 0.5,
+    stop_after_goals_s: float | None = None,
 ) -> SimulationLogs:
     """Simulates ``scenario`` on ``site`` for ``scenario.simulation_duration`` seconds.
 
-    The run stops early, cleanly, when the rover leaves the terrain, or when
+    The run stops early, cleanly, when the rover leaves the terrain, when
     ``stop_when(t, truth_pose)`` (checked every ``stop_check_period_s`` of simulated
-    time; ``truth_pose`` as ``truth.pose``) returns a reason.
+    time; ``truth_pose`` as ``truth.pose``) returns a reason, or, with
+    ``stop_after_goals_s``, that many seconds after the ground has judged every one of
+    its goals (reached or failed; a sweep's missions need not idle to the end).
 
     Args:
         meshcat: a pydrake Meshcat to draw in (and record), or None (headless).
@@ -211,7 +214,9 @@ def simulate(
     end = float(scenario.simulation_duration)
     stop_reason = ["duration reached"]
     bar = _progress_bar(end, progress)
-    clock = {"next_check": 0.0, "next_bar": 0.0, "wall0": None}
+    clock = {"next_check": 0.0, "next_bar": 0.0, "wall0": None, "goals_done": None}
+    operator = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")
+    op_ctx = operator.GetMyContextFromRoot(root)
 
     def monitor(context):
         if interrupts.requested():  # Ctrl-C whose KeyboardInterrupt something swallowed
@@ -225,9 +230,19 @@ def simulate(
                 f"site x in [{b.left:g}, {b.right:g}], y in [{b.bottom:g}, {b.top:g}] m"
             )
             return EventStatus.ReachedTermination(diagram, stop_reason[0])
-        if stop_when is not None and t >= clock["next_check"]:
+        check = stop_when is not None or stop_after_goals_s is not None
+        if check and t >= clock["next_check"]:
             clock["next_check"] = t + stop_check_period_s
-            why = stop_when(t, pose_port.Eval(mctx))
+            why = stop_when(t, pose_port.Eval(mctx)) if stop_when is not None else None
+            if stop_after_goals_s is not None and not why:
+                status = operator.operator_state(op_ctx).status
+                done = bool(status) and all(g in ("reached", "failed") for g in status)
+                if not done:
+                    clock["goals_done"] = None
+                elif clock["goals_done"] is None:
+                    clock["goals_done"] = t
+                elif t - clock["goals_done"] >= stop_after_goals_s:
+                    why = f"the ground's goals done at t = {clock['goals_done']:.1f} s"
             if why:
                 stop_reason[0] = why
                 return EventStatus.ReachedTermination(diagram, why)
@@ -294,7 +309,6 @@ def simulate(
     frames = writer.frames_written(writer.GetMyContextFromRoot(root)) if writer else 0
     executor = mission.GetSubsystemByName("flight").GetSubsystemByName("flight.executor")
     transitions = executor.executor_state(executor.GetMyContextFromRoot(root)).transitions.items()
-    operator = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")
     ops = operator.operator_state(root)
     images = []
     if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.images"):

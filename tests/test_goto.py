@@ -55,8 +55,12 @@ def test_mission_drives_to_the_goal_through_the_link(cache):
 
     scenario = load_scenario(scenario_name="goto")
     site = load_site(scenario, progress=False)
-    logs = simulate(scenario=scenario, site=site, progress=False)
+    # ends 15 s after the ground judged its goal, before the scenario's 150 s
+    logs = simulate(scenario=scenario, site=site, progress=False, stop_after_goals_s=15.0)
     summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
+    assert logs.stop_reason.startswith("the ground's goals done at t = ")
+    t_done = float(logs.stop_reason.split("t = ")[1].split(" s")[0])
+    assert logs.simulated_s == pytest.approx(t_done + 15.0, abs=0.6) and logs.simulated_s < 140
     (goal,) = summary["goals"]
     assert goal["reached"], goal
     assert goal["final_distance_m"] < 1.0

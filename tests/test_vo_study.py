@@ -28,14 +28,21 @@ def test_parse_angles_and_config_errors():
 
 def test_rotation_study_writes_vo_csv_and_png(tmp_path, capsys):
     out = tmp_path / "vo"
-    assert main(["vo-study", "--angles", "0,15", "--out", str(out), *SMALL]) == 0
+    assert main(["vo-study", "--angles", "0,15", "--images", "--out", str(out), *SMALL]) == 0
     assert "Outputs:" in capsys.readouterr().out
     rows = list(csv.DictReader(open(out / "vo.csv")))
     assert tuple(rows[0]) == CSV_COLUMNS and len(rows) == 2
     still, turned = rows
-    # standing still, the estimate barely moves; the turn is a real turn in place
+    # standing still, the estimate barely moves; the turn is a real turn in place, by
+    # the angle asked for (the command lengthened by the measured turn efficiency)
     assert float(still["odom_error_m"]) < 0.005 and float(still["true_rotation_deg"]) < 0.1
-    assert 10.0 < float(turned["true_rotation_deg"]) < 16.0
+    assert 0.5 < float(turned["turn_efficiency"]) < 1.0
+    assert abs(float(turned["true_rotation_deg"]) - 15.0) < 1.0
+    for r in rows:  # VO as the ground uses it: the odometry where it was rejected
+        used = r["odom_error_m"] if r["rejected"] == "1" else r["vo_error_m"]
+        assert r["used_error_m"] == used
+    images = sorted(p.name for p in (out / "images").iterdir())
+    assert images == ["a0_s0_0.png", "a0_s0_1.png", "a15_s0_0.png", "a15_s0_1.png"]
     assert float(turned["true_translation_m"]) < 0.5  # the mast swings round the chassis
     for r in rows:
         assert math.isfinite(float(r["vo_error_m"])) and r["rejected"] in ("0", "1")

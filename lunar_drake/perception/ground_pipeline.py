@@ -248,9 +248,10 @@ def perception_step(
         stereo_hazards,
     )
     from lunar_drake.perception.stereo import match
-    from lunar_drake.perception.vo import align
+    from lunar_drake.perception.vo import ViewFrustum, align
 
     s = state
+    frustum = ViewFrustum.from_calibration(calib, max_range_m=config.max_range_m)
     map_cfg = dc.replace(config.map, focal_px=calib.focal_px, baseline_m=calib.baseline_m)
     self_r = config.self_radius_m or (
         0.5 * rover.wheelbase_m + rover.wheel_radius_m + rover.footprint_radius_m
@@ -285,7 +286,8 @@ def perception_step(
             odom_step = float(np.linalg.norm(T_odom[:3, 3]))
             if config.use_vo:
                 al = align(s.key_cloud, cloud, init_T=T_odom, config=config.vo,
-                           prev_intensity=s.key_intensity, curr_intensity=intensity)  # fmt: skip
+                           prev_intensity=s.key_intensity, curr_intensity=intensity,
+                           frustum=frustum)  # fmt: skip
                 fit, rmse, cond, reason = al.fitness, al.inlier_rmse_m, al.condition, al.reason
                 vo_step = float(np.linalg.norm(al.T_prev_curr[:3, 3]))
                 diff = float(np.linalg.norm(al.T_prev_curr[:3, 3] - T_odom[:3, 3]))

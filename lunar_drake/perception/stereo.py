@@ -10,8 +10,10 @@ disparity, validity and a point cloud in the left camera frame. Pure (numpy + Op
    with ``num_disparities`` rounded up to a multiple of 16 from the nearest depth
    wanted (``min_depth_m``): ``d_max = f B / min_depth``.
 4. **Validity**: OpenCV's own invalid marks, left-right consistency
-   (``disp12_max_diff``), uniqueness and speckle filtering; the frame border
-   ``num_disparities`` wide on the left, where the right image has no match, is invalid.
+   (``disp12_max_diff``), uniqueness and speckle filtering. Both images are padded on
+   the left by ``num_disparities`` columns before matching (OpenCV leaves that border
+   of its input unmatched), so the left border keeps every point whose match lies in
+   the right image (``u - d >= 0``); only nearer ones there are invalid.
 5. **Depth** and points through the rectification's ``Q``: ``(X, Y, Z, W) = Q (u, v,
    d, 1)``; for the ideal rig ``Z = f B / d`` (m, along the optical axis) and ``(X, Y)
    = ((u - cx) Z / f, (v - cy) Z / f)``, in the rectified left frame (x right, y down,
@@ -169,10 +171,14 @@ def match(left_raw, right_raw, *, calib: StereoCalibration, config: StereoConfig
         uniquenessRatio=config.uniqueness_ratio, speckleWindowSize=config.speckle_window_size,
         speckleRange=config.speckle_range, mode=mode,
     )  # fmt: skip
-    raw = sgbm.compute(l8, r8)  # int16, 16 x disparity; invalid < 0
+    # Padded on the left by the disparity range, so that SGBM searches every column
+    # (OpenCV leaves the first ``n`` columns unmatched); a match must then land inside
+    # the right image (u - d >= 0).
+    pad = cv2.copyMakeBorder
+    raw = sgbm.compute(pad(l8, 0, 0, n, 0, cv2.BORDER_REPLICATE),
+                       pad(r8, 0, 0, n, 0, cv2.BORDER_REPLICATE))[:, n:]  # fmt: skip
     disp = raw.astype(np.float32) / 16.0
-    valid = raw > 0
-    valid[:, :n] = False  # no match possible at the left border
+    valid = (raw > 0) & (np.arange(calib.width)[None, :] - disp >= 0.0)
     if config.min_signal > 0.0:  # deep shadow: too little light to match
         left_rect = cv2.remap(L.astype(np.float32), m1x, m1y, cv2.INTER_LINEAR)
         valid &= left_rect >= config.min_signal * limits[1]
