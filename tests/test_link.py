@@ -356,7 +356,9 @@ def test_camera_frames_go_down_compressed_and_pay_for_their_real_bytes(small_sit
     raw = (rng.normal(1500, 300, (96, 128)).clip(0, 4095)).astype(np.uint16)
     png = encode_frame(raw, config=ImageDownlinkConfig(codec="png"))
     assert np.array_equal(decode_frame(png, codec="png"), raw)
-    assert len(png) == len(cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, 3])[1])
+    assert len(png) == len(cv2.imencode(".png", raw, [cv2.IMWRITE_PNG_COMPRESSION, 3,
+                                                      cv2.IMWRITE_PNG_STRATEGY,
+                                                      cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY])[1])
     jpg = encode_frame(raw, config=ImageDownlinkConfig(codec="jpeg", jpeg_quality=80))
     back = decode_frame(jpg, codec="jpeg")
     assert len(jpg) < len(png) and np.abs(back.astype(float) - raw).mean() < 200.0

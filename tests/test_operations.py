@@ -375,10 +375,24 @@ def test_a_new_hazard_on_the_path_stops_and_replans_once_per_map_version():
 
 
 def test_the_pose_correction_moves_the_estimate_the_ground_plans_from():
+    """The ground plans in its own (VO-corrected) frame from its corrected estimate and
+    sends the waypoints up in the rover's on-board frame (where its follower works):
+    the rover, at (2, 1) by its own estimate, is sent from there to the goal's place in
+    its frame; the ground keeps the plan in its frame."""
     g = Ground()
     g.telemetry(1.0, xy=(2.0, 1.0), mode="idle")
     (goto,) = g.tick(1.1, Request("goal", (10.0, 0.0)), correction=(0.5, -0.25, 0.0))
-    assert goto.waypoints[0] == pytest.approx((2.5, 0.75))
+    assert np.allclose(g.state.path, ((2.5, 0.75), (10.0, 0.0)), atol=1e-12)
+    assert np.allclose(goto.waypoints, ((2.0, 1.0), (9.5, 0.25)), atol=1e-12)
+    # with a rotation: p_ground = Rz(a) p_onboard + d, inverted here with a matrix
+    a, d = 0.3, np.array([1.0, -2.0])
+    g = Ground()
+    g.telemetry(1.0, xy=(2.0, 1.0), mode="idle")
+    (goto,) = g.tick(1.1, Request("goal", (10.0, 0.0)), correction=(*d, a))
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    expect = [np.linalg.solve(R, np.array(p) - d) for p in g.state.path]
+    assert np.allclose(goto.waypoints, expect, atol=1e-12)
+    assert np.allclose(goto.waypoints[0], (2.0, 1.0), atol=1e-12)  # where the rover is
 
 
 def test_the_command_preview_of_each_goto_is_kept_with_its_seq():

@@ -71,6 +71,31 @@ def test_a_boulder_is_lethal_inflated_by_the_footprint_and_the_path_goes_round()
     assert np.array_equal(again.cells, path.cells)
 
 
+def test_a_goal_beside_a_rock_moves_to_the_nearest_free_cell_within_the_radius():
+    """A goal 1.1 m from a boulder's centre lies in its inflation: refused without a
+    radius; with one, the path ends at the free cell nearest the goal (found here by
+    brute force over every cell), not farther than the radius; too small a radius is
+    refused and says so."""
+    X, Y = _grid()
+    cm = _costmap(np.where(np.hypot(X, Y) < 0.5, 0.3, 0.0))
+    goal = (1.1, 0.2)
+    with pytest.raises(PlanningError, match="inside a hazard"):
+        plan_path(costmap=cm, start_xy=(-15.0, 0.0), goal_xy=goal)
+    path = plan_path(costmap=cm, start_xy=(-15.0, 0.0), goal_xy=goal, goal_free_radius_m=1.0)
+    rr, cc = np.nonzero(np.isfinite(cm.cost))
+    g = cm.cell_of(*goal)
+    d = np.hypot(rr - g[0], cc - g[1]) * cm.resolution_m
+    best = d.min()
+    end = path.waypoints_xy[-1]
+    end_cell = cm.cell_of(*end)
+    assert np.isfinite(cm.cost[end_cell]) and best <= 1.0
+    moved = math.hypot(end_cell[0] - g[0], end_cell[1] - g[1]) * cm.resolution_m
+    assert moved == pytest.approx(best)
+    assert tuple(path.cells[-1]) == end_cell
+    with pytest.raises(PlanningError, match=r"no free cell lies within 0\.05 m"):
+        plan_path(costmap=cm, start_xy=(-15.0, 0.0), goal_xy=goal, goal_free_radius_m=0.05)
+
+
 def _crater():
     X, Y = _grid()
     d = np.hypot(X, Y)

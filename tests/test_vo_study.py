@@ -56,7 +56,8 @@ def test_straight_study_writes_straight_json(tmp_path):
                  *SMALL]) == 0  # fmt: skip
     doc = json.loads((out / "straight.json").read_text())
     assert {"distance_m", "vo_error_m", "odom_error_m"} <= set(doc)
-    assert 1.5 < doc["distance_m"] < 2.2 and doc["links"] >= 3
+    # the ground stopped it at the distance by the on-board estimate (slip included)
+    assert 1.8 < doc["distance_m"] < 2.2 and doc["links"] >= 3
     assert 0 <= doc["rejected"] <= doc["links"]
 
 

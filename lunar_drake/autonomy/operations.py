@@ -196,6 +196,27 @@ def corrected_pose(pose, correction) -> np.ndarray:
     return out
 
 
+def goal_shift_limit_m(params) -> float:
+    """How far (m) the ground may move a goal that a hazard covers (stereo found a rock
+    beside it) to the nearest free cell: the scored ``goal_tolerance_m`` less the
+    on-board ``goto_tolerance_m`` and 0.1 m, so the rover parked there still counts."""
+    return max(0.0, params.goal_tolerance_m - params.goto_tolerance_m - 0.1)
+
+
+def onboard_points(points_xy, correction) -> tuple:
+    """Points ((x, y), ...) of the ground's frame in the rover's on-board estimate frame:
+    the inverse of :func:`corrected_pose`'s map, ``p = Rz(-dyaw) (p' - d)``. A goto's
+    waypoints go up in this frame: the rover follows them with its own estimate, so a
+    goal the ground placed with VO is reached where the ground means it."""
+    dx, dy, dyaw = (float(v) for v in correction)
+    c, s = math.cos(dyaw), math.sin(dyaw)
+    out = []
+    for x, y in points_xy:
+        u, v = float(x) - dx, float(y) - dy
+        out.append((c * u + s * v, -s * u + c * v))
+    return tuple(out)
+
+
 def distance_to_path(xy, path) -> float:
     """Horizontal distance (m) from ``xy`` to the polyline ``path`` ((x, y), ...)."""
     p = np.asarray(xy, np.float64)[:2]
@@ -308,15 +329,16 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             active, goto_seq, path = -1, -1, ()
             return
         length = float(np.sum(np.hypot(*np.diff(np.asarray(wp), axis=0).T))) if len(wp) > 1 else 0
+        wp_ground = tuple((float(x), float(y)) for x, y in wp)
         cmd = GotoCommand(
-            waypoints=tuple((float(x), float(y)) for x, y in wp),
+            waypoints=onboard_points(wp_ground, correction),  # the rover's frame
             speed_mps=params.drive_speed_mps,
             tolerance_m=params.goto_tolerance_m,
             timeout_s=3.0 * length / params.drive_speed_mps + 60.0,
         )
-        goto_seq, goto_sent, path = send(cmd), now, cmd.waypoints
+        goto_seq, goto_sent, path = send(cmd), now, wp_ground
         if preview is not None:
-            predicted = (goto_seq, preview(pose, cmd.waypoints))
+            predicted = (goto_seq, preview(pose, wp_ground))
         note("plan", f"{why}: goal {active}, {len(wp)} waypoints, {length:.1f} m")
 
     # A new safing: resume (and replan below).
@@ -476,6 +498,8 @@ __all__ = [
     "Request",
     "corrected_pose",
     "distance_to_path",
+    "goal_shift_limit_m",
     "ground_pose",
+    "onboard_points",
     "operator_step",
 ]

@@ -68,26 +68,52 @@ def _simplify(costmap: Costmap, cells: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float = 0.0) -> Path:
+def nearest_free_cell(costmap: Costmap, cell, radius_m: float):
+    """The free (finite-cost) cell nearest ``cell`` (row, col) within ``radius_m`` (cell
+    centres; the lowest cost among equals), or None."""
+    k = math.ceil(radius_m / costmap.resolution_m)
+    r0, r1 = max(0, cell[0] - k), min(costmap.shape[0], cell[0] + k + 1)
+    c0, c1 = max(0, cell[1] - k), min(costmap.shape[1], cell[1] + k + 1)
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    d = np.hypot(rr - cell[0], cc - cell[1]) * costmap.resolution_m
+    ok = np.isfinite(costmap.cost[r0:r1, c0:c1]) & (d <= radius_m + 1e-9)
+    if not ok.any():
+        return None
+    i = np.lexsort((costmap.cost[r0:r1, c0:c1][ok], d[ok]))[0]
+    return int(rr[ok][i]), int(cc[ok][i])
+
+
+def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float = 0.0,
+              goal_free_radius_m: float = 0.0) -> Path:  # fmt: skip
     """The least-cost path from ``start_xy`` to ``goal_xy`` (site, m).
 
     The rover may stand in a hazard's inflation (an estimate near a rock, a replan after
     safing): its own cell, and lethal cells within ``start_free_radius_m`` of the start,
-    cost 50 per metre instead of lethal, so the path leaves them by the shortest way.
+    cost 50 per metre instead of lethal, so the path leaves them by the shortest way. A
+    goal inside a hazard is moved to the nearest free cell within
+    ``goal_free_radius_m`` (the path then ends at that cell's centre: the rover parks
+    beside a rock found next to its goal).
 
     Raises:
         OutOfBoundsError: start or goal off the map.
         PlanningError: goal (or start) inside a hazard (lethal or within the rover's
-            footprint of one), or no hazard-free path joins them.
+            footprint of one) with no free cell within ``goal_free_radius_m``, or no
+            hazard-free path joins them.
     """
     s = _cell(costmap, start_xy, "start")
     g = _cell(costmap, goal_xy, "goal")
+    end_xy = (float(goal_xy[0]), float(goal_xy[1]))
     if not np.isfinite(costmap.cost[g]):
-        raise PlanningError(
-            f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
-            f"(slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
-            "within the rover's footprint of one)"
-        )
+        moved = nearest_free_cell(costmap, g, goal_free_radius_m) if goal_free_radius_m else None
+        if moved is None:
+            near = f" and no free cell lies within {goal_free_radius_m:g} m of it"
+            raise PlanningError(
+                f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
+                f"(slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
+                "within the rover's footprint of one)" + (near if goal_free_radius_m else "")
+            )
+        g = moved
+        end_xy = tuple(float(v) for v in costmap.centre_of(*g))
     cost = costmap.cost
     k = math.ceil(start_free_radius_m / costmap.resolution_m)
     r0, r1 = max(0, s[0] - k), min(cost.shape[0], s[0] + k + 1)
@@ -114,7 +140,7 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
     x, y = costmap.centre_of(pts[:, 0], pts[:, 1])
     wp = np.column_stack([x, y])
     wp[0] = [float(start_xy[0]), float(start_xy[1])]
-    wp[-1] = [float(goal_xy[0]), float(goal_xy[1])]
+    wp[-1] = end_xy
     steps = np.diff(cells, axis=0)
     length = float(np.sum(np.hypot(steps[:, 0], steps[:, 1]))) * res
     return Path(waypoints_xy=wp, cells=cells, cost=float(cum[g]) * res, length_m=length)
@@ -176,4 +202,4 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     ax.set_aspect("equal")
 
 
-__all__ = ["Path", "PlanningError", "path_blocked", "plan_path", "plot_plan"]
+__all__ = ["Path", "PlanningError", "nearest_free_cell", "path_blocked", "plan_path", "plot_plan"]

@@ -17,7 +17,7 @@ import math
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.autonomy.commands import DriveCommand, GotoCommand
-from lunar_drake.autonomy.operations import OperatorParams, Request
+from lunar_drake.autonomy.operations import OperatorParams, Request, goal_shift_limit_m
 from lunar_drake.autonomy.planner import PlanningError
 from lunar_drake.diagrams.flight import sends_images
 from lunar_drake.errors import OutOfBoundsError
@@ -205,7 +205,9 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
     planner, in_map, prior_dem, preview = None, None, None, None
     if site is not None:
         costmap = ground_costmap(scenario, site)
-        planner = plan_waypoints(costmap)
+        planner = plan_waypoints(
+            costmap, goal_free_radius_m=goal_shift_limit_m(operator_params(scenario))
+        )
         prior_dem = ground_map_dem(scenario, site)
         preview = command_preview(scenario, prior_dem=prior_dem)
 

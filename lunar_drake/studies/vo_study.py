@@ -2,12 +2,14 @@
 
 **Rotation** (``angles``): for each angle A and seed, the mission's rover (the
 scenario's, its full plant, flight software and link) stands still, takes a stereo pair,
-turns in place by A (an uplinked drive command, yaw rate ``turn_rate_dps``), stops and
-takes a second pair. Seeds change the spawn point (within ``spawn_radius_m`` of the
-scenario's), the heading and every noise stream.
+turns in place by A (an uplinked drive command, yaw rate ``turn_rate_dps``, lengthened
+by the rover's measured turn efficiency: ``calibrate_turns``), stops and takes a second
+pair. Seeds change the spawn point (within ``spawn_radius_m`` of the scenario's), the
+heading and every noise stream.
 
 **Straight** (``straight_m``): the rover drives straight that far at ``speed_mps`` (the
-seeded spawn and heading redrawn until that straight is clear of hazards on the true
+ground stops it when the on-board estimate has it there, slip included; the seeded
+spawn and heading are redrawn until that straight is clear of hazards on the true
 costmap: the study measures VO on drivable ground, not a rover stuck on a rock); VO
 chains keyframes ``keyframe_m`` apart (by the on-board estimate): each pair is aligned
 to the previous keyframe's, a rejected alignment is replaced by the on-board motion for
@@ -241,8 +243,8 @@ def _route(config: VoStudyConfig, angle_deg: float, turn_efficiency: float = 1.0
     from lunar_drake.scenario import RouteSegment
 
     idle = RouteSegment(duration_s=4.0)
-    if config.straight_m is not None:
-        move = RouteSegment(duration_s=config.straight_m / config.speed_mps,
+    if config.straight_m is not None:  # long enough: the study stops it (run_straight)
+        move = RouteSegment(duration_s=1.5 * config.straight_m / config.speed_mps,
                             vx_mps=config.speed_mps)  # fmt: skip
     else:
         w = math.radians(config.turn_rate_dps)
@@ -451,8 +453,13 @@ def run_rotation(*, config: VoStudyConfig, site, angle_deg: float, seed: int,
     }
 
 
+STOP_LEAD_S = 1.5  # the uplink's light time and processing (~1.3 s), rounded up
+
+
 def run_straight(*, config: VoStudyConfig, site, seed: int, progress=None) -> dict:
-    """One straight drive of ``config.straight_m`` with keyframe VO chained along it."""
+    """One straight drive of ``config.straight_m`` with keyframe VO chained along it: the
+    ground sends a stop when the on-board estimate says the rover, ``STOP_LEAD_S`` of
+    driving later, will have gone the distance (so the rover drives it, slip included)."""
     from lunar_drake.perception.calibration import StereoCalibration
     from lunar_drake.perception.vo import ViewFrustum, align
 
@@ -465,8 +472,12 @@ def run_straight(*, config: VoStudyConfig, site, seed: int, progress=None) -> di
     max_range = _max_range(config, s)
     frustum = ViewFrustum.from_calibration(calib, max_range_m=max_range)
     rig = _Rig(s, site)
+    from lunar_drake.diagrams.mission import ground_operator
+
+    ops = ground_operator(rig.mission)
     k = 3
     start = rig.capture(k)
+    stop_sent = False
     key, key_cloud = start, _cloud(start, calib=calib, stereo_config=stereo,
                                    max_range_m=max_range)  # fmt: skip
     T_vo = np.eye(4)
@@ -482,6 +493,10 @@ def run_straight(*, config: VoStudyConfig, site, seed: int, progress=None) -> di
         moving = rig.speed() > 0.002
         started = started or moving
         done = started and not moving
+        est = float(np.linalg.norm(_relative(start.X_WC_est, c.X_WC_est)[:3, 3]))
+        if not stop_sent and est >= config.straight_m - config.speed_mps * STOP_LEAD_S:
+            ops.stop(rig.sim.get_mutable_context())
+            stop_sent = True
         step = np.linalg.norm(_relative(key.X_WC_est, c.X_WC_est)[:3, 3])
         if step < config.keyframe_m and not done:
             continue
@@ -645,7 +660,10 @@ def plot_vo(rows, *, path, lights: bool = False) -> None:
     ax.set_xlabel("camera rotation between frames (deg)")
     ax.set_ylabel("position error (cm)")
     ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_title("Visual odometry vs fused odometry" + (" (headlights, shadow)" if lights else ""))
+    fovs = sorted({float(r["fov_y_deg"]) for r in rows if "fov_y_deg" in r})
+    lens = f", {fovs[0]:g} deg vertical lens" if len(fovs) == 1 else ""
+    ax.set_title("VO vs fused odometry" + lens + (" (headlights, shadow)" if lights else ""),
+                 fontsize=11)  # fmt: skip
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

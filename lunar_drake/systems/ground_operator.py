@@ -15,6 +15,7 @@ from lunar_drake.autonomy.operations import (
     OperatorState,
     Request,
     corrected_pose,
+    goal_shift_limit_m,
     ground_pose,
     operator_step,
 )
@@ -194,7 +195,9 @@ class GroundOperator(LeafSystem):
         if self.costmap_input.HasValue(context):
             version, costmap = self.costmap_input.Eval(context)
             if costmap is not None:
-                planner = plan_waypoints(costmap)
+                planner = plan_waypoints(
+                    costmap, goal_free_radius_m=goal_shift_limit_m(self._params)
+                )
 
                 def blocked(path, xy, costmap=costmap):
                     return path_blocked(costmap=costmap, path_xy=path, from_xy=xy)
@@ -215,14 +218,16 @@ class GroundOperator(LeafSystem):
         state.get_mutable_abstract_state(self._state).set_value((st, k, ()))
 
 
-def plan_waypoints(costmap):
+def plan_waypoints(costmap, *, goal_free_radius_m: float = 0.0):
     """A planner for :class:`GroundOperator` on ``costmap``
-    (:func:`~lunar_drake.autonomy.planner.plan_path`)."""
+    (:func:`~lunar_drake.autonomy.planner.plan_path`; a goal inside a hazard moved to
+    the nearest free cell within ``goal_free_radius_m``)."""
     from lunar_drake.autonomy.planner import plan_path
 
     def planner(start_xy, goal_xy):
         path = plan_path(costmap=costmap, start_xy=start_xy, goal_xy=goal_xy,
-                         start_free_radius_m=1.0)  # fmt: skip
+                         start_free_radius_m=1.0,
+                         goal_free_radius_m=goal_free_radius_m)  # fmt: skip
         return [tuple(map(float, p)) for p in np.asarray(path.waypoints_xy)]
 
     return planner

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -32,17 +33,28 @@ class CameraMount:
 
 @dc.dataclass(frozen=True, eq=False)
 class Frame:
-    """One camera's frame: raw uint16 (12-bit codes), 8-bit preview, depth (m), label
-    (0 sky, 1 terrain, 2 rover), I/F radiance, capture time and index. Immutable (kept in
-    abstract state without copies)."""
+    """One camera's frame: raw uint16 (12-bit codes), depth (m), label (0 sky, 1 terrain,
+    2 rover), I/F radiance, capture time and index, and the 8-bit ``preview`` of the raw
+    codes through ``sensor`` (computed on first use: a mission that never shows or writes
+    its frames never pays for it; blank without a sensor). Immutable (kept in abstract
+    state without copies)."""
 
     raw: np.ndarray
-    preview: np.ndarray
     depth: np.ndarray
     label: np.ndarray
     radiance: np.ndarray
     time_s: float
     index: int
+    sensor: object = None
+
+    @functools.cached_property
+    def preview(self) -> np.ndarray:
+        if self.sensor is None:
+            return np.zeros(self.raw.shape, np.uint8)
+        return sensor_mod.to_preview_8bit(
+            self.raw, params=self.sensor, auto=False,
+            full_scale=float(2**self.sensor.adc_bits - 1),
+        )  # fmt: skip
 
     def __deepcopy__(self, memo):
         return self
@@ -263,10 +275,13 @@ class HapkeCamera(LeafSystem):
         )
         dyn = [query.GetPoseInWorld(g).GetAsMatrix4() for g in self._gids]
         frames = {}
-        for mt in self._mounts:
-            X_WC = poses[int(mt.body_index)].multiply(mt.X_BC)
+        X_WCs = [poses[int(mt.body_index)].multiply(mt.X_BC) for mt in self._mounts]
+        # one track window for the rig (its cameras are centimetres apart), 1 m wider
+        centre = np.mean([X.translation() for X in X_WCs], axis=0)
+        spread = max(float(np.linalg.norm(X.translation() - centre)) for X in X_WCs)
+        tracks = self._track_sampler(tracks_in, centre, half_m=25.0 + spread + 1.0)
+        for mt, X_WC in zip(self._mounts, X_WCs, strict=True):
             self._check_above_terrain(mt.name, X_WC.translation(), t)
-            tracks = self._track_sampler(tracks_in, X_WC.translation())
             shaded = self._r.shade(
                 X_WC=X_WC,
                 illumination=illum,
@@ -281,21 +296,15 @@ class HapkeCamera(LeafSystem):
                 key=self._keys[mt.name],
                 frame_index=index,
             )
-            preview = sensor_mod.to_preview_8bit(
-                raw,
-                params=self._r.sensor,
-                auto=False,
-                full_scale=float(2**self._r.sensor.adc_bits - 1),
-            )
             depth = np.where(np.isfinite(shaded.depth), shaded.depth, np.inf).astype(np.float32)
             frames[mt.name] = Frame(
                 raw=raw,
-                preview=preview,
                 depth=depth,
                 label=shaded.label.astype(np.int16),
                 radiance=shaded.radiance,
                 time_s=t,
                 index=index,
+                sensor=self._r.sensor,
             )
         ring = context.get_abstract_state(self._state).get_value()
         state.get_mutable_abstract_state(self._state).set_value((frames, *ring[:-1]))
@@ -333,7 +342,6 @@ class HapkeCamera(LeafSystem):
 def _blank(w: int, h: int) -> Frame:
     return Frame(
         raw=np.zeros((h, w), np.uint16),
-        preview=np.zeros((h, w), np.uint8),
         depth=np.full((h, w), np.inf, np.float32),
         label=np.zeros((h, w), np.int16),
         radiance=np.zeros((h, w), np.float32),

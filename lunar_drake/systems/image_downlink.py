@@ -9,7 +9,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, encode_frame
+from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, encode_frames
 from lunar_drake.comms.messages import Ledger, Message
 
 TOPIC = "images"
@@ -32,7 +32,7 @@ class ImagePacketizer(LeafSystem):
 
     Every ``period_s`` from ``offset_s`` (just after a frame is delivered) it checks the
     camera's ``frame_index``; a new frame whose index is a multiple of
-    ``config.every_n_frames`` is encoded (:func:`~lunar_drake.comms.images.encode_frame`)
+    ``config.every_n_frames`` is encoded (:func:`~lunar_drake.comms.images.encode_frames`)
     and published: ``images`` is an outbox (a tuple with the newest message; topic
     ``images``, seq = frames sent so far, payload a
     :class:`~lunar_drake.comms.images.StereoFrame`). Inputs are camera sensor outputs
@@ -90,12 +90,16 @@ class ImagePacketizer(LeafSystem):
         outbox = ()
         pose, pan_tilt, t_changed = context.get_abstract_state(self._latched).get_value()
         if k % self._config.every_n_frames == 0:
+            left, right = encode_frames(
+                [self.left_input.Eval(context), self.right_input.Eval(context)],
+                config=self._config,
+            )
             frame = StereoFrame(
                 frame_index=k,
                 t_capture_s=k * self._period,
                 codec=self._config.codec,
-                left=encode_frame(self.left_input.Eval(context), config=self._config),
-                right=encode_frame(self.right_input.Eval(context), config=self._config),
+                left=left,
+                right=right,
                 pose_estimate=pose,
                 pan_tilt_rad=pan_tilt,
                 gimbal_steady_s=k * self._period - t_changed,
