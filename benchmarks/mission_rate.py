@@ -43,7 +43,7 @@ def main(argv=None) -> int:
         )
         sim_s, repeats = a.sim_s or 60.0, a.repeats or 2
     args = ["--scenario", a.scenario, "--sim-s", str(sim_s), "--repeats", str(repeats),
-            "--scenario-text", text]  # fmt: skip
+            "--scenario-text", text, "--goal", "3" if a.no_cameras else "1"]  # fmt: skip
     if a.out:
         args += ["--out", a.out, "--rtf-key", "rtf"]
     return sim_rate_main(args)

@@ -256,7 +256,8 @@ def ground(logs: SimulationLogs) -> dict:
 
 
 def _perception(keyframes) -> dict:
-    """The ground perception's keyframes: how many, VO outcomes, lethal cells added."""
+    """The ground perception's keyframes: how many, VO outcomes, lethal cells added, the
+    ground's final position sigma since the first keyframe (m, per axis)."""
     vo = {}
     for k in keyframes:
         vo[k.vo] = vo.get(k.vo, 0) + 1
@@ -264,6 +265,7 @@ def _perception(keyframes) -> dict:
         "keyframes": len(keyframes),
         "vo": dict(sorted(vo.items())),
         "lethal_cells_added": int(sum(k.new_lethal for k in keyframes)),
+        "final_sigma_m": round(float(keyframes[-1].sigma_m), 6) if keyframes else None,
     }
 
 

@@ -208,8 +208,13 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
     cfg = PerceptionConfig(odom_sigma_fraction=0.1, vo_sigma_m=0.01, keyframe_m=0.5)
     st = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
                          config=cfg, **scene["kw"])  # fmt: skip
-    rec = st.records.items()[-1]
+    first, rec = st.records.items()
     assert rec.vo == "accepted", rec.reason
+    # the ground's position sigma: 0 at the first keyframe, then the fused link's
+    # (independent estimates: information adds)
+    sig_o = 0.1 * rec.odom_step_m + cfg.odom_sigma_min_m
+    assert first.sigma_m == 0.0
+    assert rec.sigma_m == pytest.approx((sig_o**-2 + 0.01**-2) ** -0.5, rel=1e-12)
     ground = corrected_pose(est1, planar_correction(st.correction))
     err_ground = math.hypot(ground[0] - 0.8, ground[1])
     assert err_ground < 0.05 < 0.2 == pytest.approx(math.hypot(est1[0] - 0.8, est1[1]))
@@ -224,6 +229,7 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
                           config=dc.replace(cfg, use_vo=False), **scene["kw"])  # fmt: skip
     assert st2.records.items()[-1].vo == "off"
     np.testing.assert_allclose(planar_correction(st2.correction), 0.0, atol=1e-9)
+    assert st2.records.items()[-1].sigma_m == pytest.approx(sig_o, rel=1e-12)  # odometry's
 
 
 def test_frames_taken_while_the_gimbal_moved_or_without_a_header_are_skipped(scene):
