@@ -185,11 +185,16 @@ def _cmd_run(args) -> int:
     per = summary.get("perception") or {}
     if per.get("keyframes"):
         vo = ", ".join(f"{n} {k}" for k, n in per["vo"].items())
+        sigma = per.get("final_sigma_m")
+        drift = f"; the ground's position sigma {sigma:.2f} m" if sigma is not None else ""
         print(f"Perception: {_plural(per['keyframes'], 'stereo keyframe')} (VO: {vo}); "
-              f"{per['lethal_cells_added']} lethal cells added to the ground's map")  # fmt: skip
+              f"{per['lethal_cells_added']} lethal cells added to the ground's map"
+              f"{drift}")  # fmt: skip
     files = outputs.run_files()
     if per.get("keyframes"):
         files.append("keyframes.csv")
+    if (out / "ground_map.png").exists():
+        files.append("ground_map.png")
     if scenario.sensors.camera.enabled:
         files.append("calibration.yaml")
     if summary["camera_frames"]:

@@ -7,8 +7,9 @@ A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake ru
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
 the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
-mapping keyframes; with ground perception), ``calibration.yaml`` (the stereo rig, OpenCV style;
-with the cameras on), ``frames/`` (written during the
+mapping keyframes; with ground perception), ``ground_map.png`` (the ground's final
+costmap round the traverse: :mod:`lunar_drake.ground_map`), ``calibration.yaml`` (the
+stereo rig, OpenCV style; with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
 The CLI builds it in a temporary sibling directory and swaps it in when complete
 (:func:`lunar_drake.files.staged_directory`).
@@ -59,6 +60,7 @@ RUN_DIR_NAMES = frozenset(
         "ground_events.csv",
         "images.csv",
         "keyframes.csv",
+        "ground_map.png",
         "calibration.yaml",
         "frames",
         "meshcat.html",
@@ -172,6 +174,10 @@ def write_run(
         )
         write_csv(out / "keyframes.csv", names, rows)
         paths.append(out / "keyframes.csv")
+    if getattr(logs, "ground_costmap", None) is not None:
+        from lunar_drake.ground_map import write_ground_map
+
+        paths.append(write_ground_map(out / "ground_map.png", logs=logs, scenario=scenario))
     if scenario.sensors.camera.enabled:
         from lunar_drake.perception.calibration import StereoCalibration
 

@@ -5,6 +5,7 @@ around a new hazard). References: scipy's rotations, hand-made transforms, the s
 own geometry."""
 
 import dataclasses as dc
+import itertools
 import math
 
 import numpy as np
@@ -24,6 +25,7 @@ from lunar_drake.perception.ground_pipeline import (
     PerceptionState,
     _recentred,
     fuse_translation,
+    innovation,
     perception_step,
     planar_correction,
     pose_matrix,
@@ -147,6 +149,23 @@ def test_planar_correction_applied_to_a_pose_equals_the_matrix_product():
     assert tuple(corrected_pose(pose, (0.0, 0.0, 0.0))) == pose
 
 
+def test_the_innovation_lets_slip_through_and_nothing_else():
+    """VO shorter than the wheels along their direction, down to standing still, is slip
+    (no innovation); longer, backwards past standing still, or sideways is innovation."""
+    odom = np.array([0.6, 0.8, 0.0])  # 1 m along (0.6, 0.8)
+    u, v = odom, np.array([-0.8, 0.6, 0.0])  # along, across
+    for vo, excess, slip in [
+        (0.7 * u, 0.0, 0.3),  # 30 % slip
+        (1.2 * u, 0.2, 0.0),  # 0.2 m further than the wheels
+        (u + 0.1 * v, 0.1, 0.0),  # sideways
+        (0.7 * u + 0.1 * v, 0.1, 0.3),
+        (-0.2 * u, 0.2, 1.0),  # stuck, and 0.2 m backwards on top
+    ]:
+        e, sl = innovation(odom, vo)
+        assert e == pytest.approx(excess, abs=1e-12) and sl == pytest.approx(slip, abs=1e-12)
+    assert innovation(np.zeros(3), np.array([0.0, 0.3, 0.4])) == pytest.approx((0.5, 0.0))
+
+
 def test_fuse_translation_is_the_inverse_variance_mean():
     t = fuse_translation([1.0, 0.0, 0.0], [1.3, 0.3, 0.0], sigma_odom_m=0.2, sigma_vo_m=0.1)
     # weights 25 and 100: (25 * 1 + 100 * 1.3) / 125 = 1.24; (100 * 0.3) / 125 = 0.24
@@ -211,19 +230,27 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
     first, rec = st.records.items()
     assert rec.vo == "accepted", rec.reason
     # the ground's position sigma: 0 at the first keyframe, then the fused link's
-    # (independent estimates: information adds)
+    # (independent estimates: information adds), the odometry's sigma grown by the
+    # ~0.2 m of slip VO saw
     sig_o = 0.1 * rec.odom_step_m + cfg.odom_sigma_min_m
     assert first.sigma_m == 0.0
-    assert rec.sigma_m == pytest.approx((sig_o**-2 + 0.01**-2) ** -0.5, rel=1e-12)
+    lo, hi = ((math.hypot(sig_o, slip) ** -2 + 0.01**-2) ** -0.5 for slip in (0.15, 0.25))
+    assert lo < rec.sigma_m < hi
     ground = corrected_pose(est1, planar_correction(st.correction))
     err_ground = math.hypot(ground[0] - 0.8, ground[1])
     assert err_ground < 0.05 < 0.2 == pytest.approx(math.hypot(est1[0] - 0.8, est1[1]))
-    # a tighter on-board sigma puts 0.2 m beyond the innovation gate: not fused
-    tight = perception_step(PerceptionState(costmap=scene["prior"]), frames,
-                            prior=scene["dem"], config=dc.replace(cfg, odom_sigma_fraction=0.02),
-                            **scene["kw"])  # fmt: skip
-    assert tight.records.items()[-1].vo == "gated"
-    np.testing.assert_allclose(planar_correction(tight.correction), 0.0, atol=1e-9)
+    # with a tight on-board sigma the 0.2 m shortfall is still fused (slip: wheels
+    # over-read), but 0.2 m sideways, which slip cannot explain, is beyond the gate
+    tight = dc.replace(cfg, odom_sigma_fraction=0.02)
+    st_t = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                           config=tight, **scene["kw"])  # fmt: skip
+    assert st_t.records.items()[-1].vo == "accepted"
+    side = _pose6(0.8, 0.2, math.radians(3.0))
+    frames_side = [frames[0], (1, scene["frame"](1, pose_matrix(true1), side))]
+    st_s = perception_step(PerceptionState(costmap=scene["prior"]), frames_side,
+                           prior=scene["dem"], config=tight, **scene["kw"])  # fmt: skip
+    assert st_s.records.items()[-1].vo == "gated"
+    np.testing.assert_allclose(planar_correction(st_s.correction), 0.0, atol=1e-9)
     # without VO the ground keeps the on-board estimate
     st2 = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
                           config=dc.replace(cfg, use_vo=False), **scene["kw"])  # fmt: skip
@@ -257,3 +284,35 @@ def test_frames_between_keyframes_are_skipped(scene):
 def test_perception_config_errors_name_the_field(field, value):
     with pytest.raises(OutOfRangeError, match=field):
         dc.replace(PerceptionConfig(), **{field: value}).validate()
+
+
+def test_a_mission_with_ground_perception_writes_its_keyframes_and_map(cache, tmp_path):
+    """The `goto` mission with the mast cameras on (320 x 240, 1 Hz), every frame sent
+    down and the ground's perception running: keyframes are processed from the
+    downlinked frames with VO fused, and the run directory holds keyframes.csv (with the
+    ground's position sigma growing from 0) and ground_map.png; the rover still reaches
+    its goal."""
+    import csv
+
+    from lunar_drake import metrics, outputs
+    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
+    scenario = load_scenario(scenario_name="goto", scenario_text=(
+        "{sensors: {camera: {enabled: true, width: 320, height: 240, rate_hz: 1.0}},"
+        " flight: {images: {enabled: true}}, ground: {perception: {enabled: true}}}"))  # fmt: skip
+    site = load_site(scenario, progress=False)
+    logs = simulate(scenario=scenario, site=site, progress=False, stop_after_goals_s=2.0)
+    summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
+    assert summary["goals"][0]["reached"], summary["goals"]
+    gp = summary["perception"]
+    assert gp["keyframes"] >= 5 and gp["vo"].get("accepted", 0) >= 3, gp
+    outputs.write_run(tmp_path, scenario=scenario, logs=logs, summary=summary,
+                      timing=logs.wall)  # fmt: skip
+    rows = list(csv.DictReader(open(tmp_path / "keyframes.csv")))
+    sig = [float(r["sigma_m"]) for r in rows]
+    assert sig[0] == 0.0 and all(b >= a for a, b in itertools.pairwise(sig)) and sig[-1] > 0
+    assert gp["final_sigma_m"] == pytest.approx(sig[-1], rel=1e-5)
+    png = (tmp_path / "ground_map.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000

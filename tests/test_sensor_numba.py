@@ -115,8 +115,10 @@ def test_counts_at_the_cdf_edge(K):
     L = np.where(u > 1e-6, hi, 0.0)
     lam = L * rate
     cdf = _cdf(lam, K)
-    other = _cdf(lam, K, libm=False) if K == 0 else _cdf(lam, K, reorder=True)
-    assert np.count_nonzero((u < cdf) != (u < other)) > 20  # the edge is that sharp
+    # the edge is that sharp: two ulps off the CDF change many counts (for K = 0 numpy's
+    # exp and libm's agree to the bit on some builds, so the ulps are taken here)
+    other = np.nextafter(np.nextafter(cdf, 1.0), 1.0) if K == 0 else _cdf(lam, K, reorder=True)
+    assert np.count_nonzero((u < cdf) != (u < other)) > 20
     raw = sn.expose(L, exposure_s=T, params=COUNTING, key=KEY, frame_index=0)
     assert np.array_equal(raw, _reference(L, params=COUNTING))
     assert np.array_equal(raw <= K, u < cdf)

@@ -14,10 +14,11 @@ the on-board pose estimate and the gimbal angles at capture):
   keyframe's from the on-board motion between the two (``T_odom``).
 * **fusion** (the ground's filter): the camera's motion between keyframes is the
   inverse-variance mean of the on-board translation (sigma ``odom_sigma_fraction`` x
-  distance + ``odom_sigma_min_m``) and the VO translation (sigma ``vo_sigma_m``), the
-  rotation the on-board one (star tracker: arcseconds). A rejected alignment leaves
-  the on-board motion, as does one further from the on-board step than
-  ``vo_gate_sigmas`` combined sigmas (innovation gate). The ground's keyframe pose is
+  distance + ``odom_sigma_min_m``, grown by the slip VO shows) and the VO translation
+  (sigma ``vo_sigma_m``), the rotation the on-board one (star tracker: arcseconds). A
+  rejected alignment leaves the on-board motion, as does one further from the
+  on-board step than ``vo_gate_sigmas`` combined sigmas in a way slip cannot explain
+  (:func:`innovation`: the innovation gate). The ground's keyframe pose is
   the previous one composed with the fused motion; ``correction`` (4 x 4) maps on-board
   poses to the ground's (``X_W_ground = correction @ X_W_onboard``), applied to
   telemetry between keyframes. This is a Kalman update of the relative motion with
@@ -78,8 +79,9 @@ class PerceptionConfig:
         vo_sigma_m: VO translation sigma per keyframe link (m; vo-study's straight
             drives: 6-11 cm over 19 links of 1 m).
         vo_gate_sigmas: an accepted alignment whose translation differs from the
-            on-board one by more than this many combined sigmas is not fused (the
-            innovation gate; recorded as ``vo: gated``).
+            on-board one by more than this many combined sigmas, in a way slip cannot
+            explain (:func:`innovation`), is not fused (the innovation gate; recorded
+            as ``vo: gated``).
         stereo, vo, map: :class:`StereoConfig`, :class:`VoConfig`,
             :class:`ElevationMapConfig` (its ``focal_px`` and ``baseline_m`` are not
             read: they come from the rig's calibration).
@@ -190,6 +192,30 @@ def planar_correction(correction) -> tuple[float, float, float]:
     C = np.asarray(correction, np.float64)
     dyaw = math.atan2(C[1, 0], C[0, 0])
     return float(C[0, 3]), float(C[1, 3]), dyaw
+
+
+def innovation(t_odom, t_vo) -> tuple[float, float]:
+    """How far a VO translation ``t_vo`` is from the on-board one ``t_odom`` (3,; m) in
+    the ways slip cannot explain, and the slip it shows: (excess m, slip m).
+
+    Wheels that slip turn more than the rover moves, so the odometry over-reads along
+    its own direction: VO shorter than it along that direction, down to standing still,
+    is slip (``slip`` = the shortfall) and no innovation; VO longer, VO past standing
+    still (backwards) or across the direction of travel is (``excess``: the norm of
+    those parts). Measured on the orbital-map autonomy runs: a rover stuck on a crater
+    rim read 0.93 / 0.86 / 0.72 m on its wheels where VO (and truth) said 0.67 / 0.56 /
+    0.33 m; a symmetric gate threw those VO steps out and the ground ended 1.7 m off."""
+    to = np.asarray(t_odom, np.float64)
+    d = np.asarray(t_vo, np.float64) - to
+    n = float(np.linalg.norm(to))
+    if n < 1e-9:
+        return float(np.linalg.norm(d)), 0.0
+    u = to / n
+    along = float(d @ u)
+    perp = float(np.linalg.norm(d - along * u))
+    slip = min(max(-along, 0.0), n)
+    beyond = along if along > 0.0 else max(-along - n, 0.0)
+    return math.hypot(beyond, perp), slip
 
 
 def fuse_translation(t_odom, t_vo, *, sigma_odom_m: float, sigma_vo_m: float) -> np.ndarray:
@@ -305,16 +331,18 @@ def perception_step(
                 vo_step = float(np.linalg.norm(al.T_prev_curr[:3, 3]))
                 diff = float(np.linalg.norm(al.T_prev_curr[:3, 3] - T_odom[:3, 3]))
                 gate = config.vo_gate_sigmas * math.hypot(sig_o, config.vo_sigma_m)
+                excess, slip = innovation(T_odom[:3, 3], al.T_prev_curr[:3, 3])
                 if al.rejected:
                     vo = "rejected"
-                elif diff > gate:
-                    vo, reason = "gated", f"{diff:.3f} m from the on-board step > {gate:.3f} m"
+                elif excess > gate:
+                    vo, reason = "gated", f"{excess:.3f} m from the on-board step > {gate:.3f} m"
                 else:
                     vo = "accepted"
+                    sig_slip = math.hypot(sig_o, slip)  # the odometry missed that slip
                     T[:3, 3] = fuse_translation(T_odom[:3, 3], al.T_prev_curr[:3, 3],
-                                                sigma_odom_m=sig_o,
+                                                sigma_odom_m=sig_slip,
                                                 sigma_vo_m=config.vo_sigma_m)  # fmt: skip
-                    step_var = 1.0 / (1.0 / sig_o**2 + 1.0 / config.vo_sigma_m**2)
+                    step_var = 1.0 / (1.0 / sig_slip**2 + 1.0 / config.vo_sigma_m**2)
             else:
                 vo = "off"
             X_WC_ground = s.key_X_WC_ground @ T
@@ -360,6 +388,7 @@ __all__ = [
     "PerceptionConfig",
     "PerceptionState",
     "fuse_translation",
+    "innovation",
     "perception_step",
     "planar_correction",
     "pose_matrix",
