@@ -45,7 +45,8 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
     r1 = int(np.clip(np.ceil((cm.y1_m - lo[1]) / res), r0 + 1, rows))
     cost = cm.cost[r0:r1, c0:c1]
     extent = (cm.x0_m + c0 * res, cm.x0_m + c1 * res, cm.y1_m - r1 * res, cm.y1_m - r0 * res)
-    fig = Figure(figsize=(8, 8))
+    aspect = (extent[3] - extent[2]) / max(extent[1] - extent[0], 1e-9)
+    fig = Figure(figsize=(8.0, float(np.clip(8.0 * aspect + 1.0, 4.0, 11.0))))
     ax = fig.subplots()
     finite = np.where(np.isfinite(cost), cost, np.nan)
     ax.imshow(finite, extent=extent, cmap="Greys", origin="upper", interpolation="nearest")
