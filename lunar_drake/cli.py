@@ -7,6 +7,7 @@ lunar-drake terrain synth --size N --resolution M --seed S --out DIR [...]
 lunar-drake scenarios [FILE]
 lunar-drake slip-fit DATA.csv --rover {skid,explicit} --out DIR [--base-soil NAME|FILE]
 lunar-drake vo-study --angles A:B:STEP --seeds N [--lights] [--straight DIST_M] --out DIR
+lunar-drake world build SITE_DIR --out DIR [--utc TIME] [--config FILE.yaml]
 """
 
 from __future__ import annotations
@@ -292,6 +293,36 @@ def _cmd_plan(args) -> int:
     return 0
 
 
+def _cmd_world_build(args) -> int:
+    from lunar_drake.science.config import WorldConfig
+    from lunar_drake.science.world import build_world
+
+    config = WorldConfig()
+    if args.config:
+        from pydrake.common.yaml import yaml_load_typed
+
+        if not Path(args.config).is_file():
+            raise ConfigError(f"--config {args.config!r} does not exist")
+        try:
+            config = yaml_load_typed(schema=WorldConfig, filename=args.config)
+        except RuntimeError as exc:
+            raise ConfigError(f"--config {args.config!r}: {str(exc).splitlines()[0]}") from None
+    if args.workers is not None:
+        config.workers = args.workers
+    doc = build_world(site_dir=args.site_dir, out_dir=args.out, utc=args.utc, config=config,
+                      seed=args.seed, progress=not args.no_progress)  # fmt: skip
+    layers = doc["layers"]
+    print(
+        f"World model of {args.site_dir} at {doc['utc']} ({doc['shape'][0]} x {doc['shape'][1]} "
+        f"px, {doc['seconds']:.1f} s): permanent shadow {100 * doc['psr_fraction']:.2f} % "
+        f"(Sun up to {doc['sun_envelope']['max_elevation_deg']:.2f} deg over the year); "
+        f"temperature {layers['temperature_K']['min']:.0f}-{layers['temperature_K']['max']:.0f}"
+        f" K; ice up to {layers['ice_wt_pct']['max']:.2f} wt%"
+    )
+    print(f"Outputs: {Path(args.out).resolve()} (<layer>.tif, <layer>.png, world.json)")
+    return 0
+
+
 def _cmd_render(args) -> int:
     from lunar_drake.render_cli import render_stereo
     from lunar_drake.scenario_files import load_scenario
@@ -566,6 +597,20 @@ def build_parser() -> argparse.ArgumentParser:
     pn.add_argument("--out", required=True, help="output directory")
     pn.add_argument("--no-progress", action="store_true")
     pn.set_defaults(func=_cmd_plan)
+
+    w = sub.add_parser("world", help="the science world model of a site")
+    wsub = w.add_subparsers(dest="world_command", required=True)
+    wb = wsub.add_parser("build", help="build every layer of a site's world model")
+    wb.add_argument("site_dir", help="a site directory (from 'terrain synth')")
+    wb.add_argument("--out", required=True, help="output directory")
+    wb.add_argument("--utc", default=None,
+                    help="epoch of the temperature and OH layers (default: the default "
+                         "scenario's)")  # fmt: skip
+    wb.add_argument("--config", default=None, help="a WorldConfig YAML file")
+    wb.add_argument("--seed", type=int, default=None, help="noise seed (default: the site's)")
+    wb.add_argument("--workers", type=_positive_int, default=None)
+    wb.add_argument("--no-progress", action="store_true")
+    wb.set_defaults(func=_cmd_world_build)
 
     t = sub.add_parser("terrain", help="terrain tools")
     tsub = t.add_subparsers(dest="terrain_command", required=True)

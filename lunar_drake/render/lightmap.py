@@ -752,21 +752,28 @@ def sun_in_grid_frame(hf, utc: str) -> tuple[float, float]:
             f"--utc needs lunar_drake.ephemeris, which is not available ({exc}); pass "
             "--sun-az and --sun-el (deg, azimuth clockwise from grid north) instead"
         ) from exc
+    site, beta = site_and_grid_north(hf, enu_basis=enu_basis, SiteLocation=SiteLocation)
+    se = sun_earth_enu(utc=utc, site=site)
+    return (float(se.sun_azimuth_deg) + beta) % 360.0, float(se.sun_elevation_deg)
+
+
+def site_and_grid_north(hf, *, enu_basis, SiteLocation) -> tuple:
+    """``(SiteLocation at the DEM's centre, grid azimuth of true north (deg))``: add the
+    second to an ENU azimuth to get one from grid north (the meridian convergence of a
+    polar stereographic grid)."""
     from lunar_drake.terrain.crs import MOON_RADIUS_M as R
     from lunar_drake.terrain.crs import lonlat_to_xy, xy_to_lonlat
 
     ox, oy = hf.origin_xy
     lon, lat = (float(v) for v in xy_to_lonlat(ox, oy, crs=hf.crs))
     site = SiteLocation(lat, lon, 0.0)
-    se = sun_earth_enu(utc=utc, site=site)
     # Grid azimuth of true north: step 1 m along the site's ENU north and project.
     _east, north, up = enu_basis(site)
     p = up * R + north * 1.0
     lat1 = math.degrees(math.asin(p[2] / np.linalg.norm(p)))
     lon1 = math.degrees(math.atan2(p[1], p[0]))
     x1, y1 = lonlat_to_xy(lon1, lat1, crs=hf.crs)
-    beta = math.degrees(math.atan2(float(x1) - ox, float(y1) - oy))
-    return (float(se.sun_azimuth_deg) + beta) % 360.0, float(se.sun_elevation_deg)
+    return site, math.degrees(math.atan2(float(x1) - ox, float(y1) - oy))
 
 
 def run_cli(args) -> int:

@@ -1,0 +1,84 @@
+"""Benchmark: the science world model's full stack on an N^2 site at 4 cm.
+
+    .venv/bin/python benchmarks/world_model.py --size 2048 --out bench_world_2048.json
+    .venv/bin/python benchmarks/world_model.py --size 8192 --out bench_world_8192.json
+
+A site of ``--size``^2 pixels at ``--resolution`` (4 cm) is synthesized first (``terrain
+synth``, cached under ``--cache``; not timed), then ``lunar-drake world build`` runs in
+a child process: ``seconds`` is its wall time and ``peak_rss_mb`` its peak resident
+memory (``getrusage`` of the child). Goals (issue 15): 8192^2 in <= 60 s and <= 4 GB;
+30720^2 within 15 minutes and 4 GB. Prints a table; writes JSON with --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from lunar_drake.files import atomic_write_text, check_output_file
+
+
+def site_for(size: int, resolution_m: float, seed: int, cache: Path) -> Path:
+    """A synthesized site directory (built once per size/resolution/seed)."""
+    from lunar_drake.terrain.synth import SynthConfig, synthesize_site
+
+    d = cache / f"site_{size}_{resolution_m:g}_{seed}"
+    if not (d / "site.json").is_file():
+        cfg = SynthConfig(size_px=size, resolution_m=resolution_m, seed=seed,
+                          center_lat_deg=-85.4, center_lon_deg=31.6)  # fmt: skip
+        synthesize_site(config=cfg, out_dir=d, progress=True, overview=False)
+    return d
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--size", type=int, default=2048, help="site side (px)")
+    p.add_argument("--resolution", type=float, default=0.04, help="pixel (m)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "lunar_drake_bench"),
+                   help="where synthesized sites are kept")  # fmt: skip
+    p.add_argument("--out", default=None, help="write results as JSON here")
+    args = p.parse_args(argv)
+    if args.out:
+        check_output_file(args.out)
+    cache = Path(args.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    site = site_for(args.size, args.resolution, args.seed, cache)
+    with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        cmd = [sys.executable, "-m", "lunar_drake.cli", "world", "build", str(site),
+               "--out", tmp, "--workers", str(args.workers), "--no-progress"]  # fmt: skip
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        seconds = time.perf_counter() - t0
+        if proc.returncode != 0:
+            print(proc.stderr, file=sys.stderr)
+            return proc.returncode
+        peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        world = json.loads((Path(tmp) / "world.json").read_text())
+    doc = {
+        "size": args.size,
+        "resolution_m": args.resolution,
+        "seconds": round(seconds, 2),
+        "peak_rss_mb": round(peak_kb / 1024.0, 1),
+        "psr_fraction": world["psr_fraction"],
+        "workers": args.workers,
+        "machine": platform.platform(),
+    }
+    print(f"{'size':>8} {'pixel m':>8} {'seconds':>9} {'peak MB':>9} {'PSR %':>7}")
+    print(f"{args.size:>8} {args.resolution:>8g} {doc['seconds']:>9.1f} "
+          f"{doc['peak_rss_mb']:>9.0f} {100 * doc['psr_fraction']:>7.2f}")  # fmt: skip
+    if args.out:
+        atomic_write_text(args.out, json.dumps(doc, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,129 @@
+"""Volatile layers from temperature and shadow (numpy/scipy; no Drake).
+
+The relations and their sources are documented on the config classes of
+:mod:`lunar_drake.science.config` (:class:`~.config.FrostConfig`,
+:class:`~.config.OHConfig`, :class:`~.config.IceConfig`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from lunar_drake.science.config import FrostConfig, IceConfig, OHConfig
+
+#: 8-connectivity for shadow patches.
+_EIGHT = np.ones((3, 3), bool)
+
+
+def label_patches(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(labels, areas_px)``: 8-connected patches of ``mask`` (0 = outside; patch k has
+    ``areas_px[k]`` cells, ``areas_px[0] = 0``)."""
+    labels, n = ndimage.label(np.asarray(mask, bool), structure=_EIGHT)
+    areas = np.bincount(labels.ravel(), minlength=n + 1)
+    areas[0] = 0
+    return labels, areas
+
+
+def frost_area_fraction(
+    psr: np.ndarray,
+    t_max_k: np.ndarray,
+    *,
+    resolution_m: float,
+    config: FrostConfig | None = None,
+    stable_k: float = 110.0,
+) -> np.ndarray:
+    """Surface frost area fraction (-): in permanent shadow colder than ``stable_k`` at
+    its warmest, ``max_area_frac (1 - exp(-A / area_scale_m2))`` for a patch of area A."""
+    cfg = config or FrostConfig()
+    cold = np.asarray(psr, bool) & (np.asarray(t_max_k) < stable_k)
+    labels, areas = label_patches(cold)
+    area_m2 = areas.astype(np.float64) * resolution_m**2
+    per_patch = cfg.max_area_frac * -np.expm1(-area_m2 / cfg.area_scale_m2)
+    per_patch[0] = 0.0
+    return per_patch[labels]
+
+
+def oh_ppm(t_k: np.ndarray, *, config: OHConfig | None = None) -> np.ndarray:
+    """Surface OH (ppm) at temperature ``t_k`` (K): a falling logistic."""
+    cfg = config or OHConfig()
+    x = (np.asarray(t_k, np.float64) - cfg.half_K) / cfg.width_K
+    return cfg.min_ppm + (cfg.max_ppm - cfg.min_ppm) * 0.5 * (1.0 - np.tanh(0.5 * x))
+
+
+def dry_layer_m(
+    t_max_k: np.ndarray, t_mean_k: np.ndarray, *, config: IceConfig | None = None
+) -> np.ndarray:
+    """Depth of the ice-free top layer (m): where the decaying temperature wave's maximum
+    falls to ``stable_K`` (see :class:`~.config.IceConfig`), within ``[0, max_depth_m]``."""
+    cfg = config or IceConfig()
+    t_max = np.asarray(t_max_k, np.float64)
+    t_mean = np.minimum(np.asarray(t_mean_k, np.float64), t_max)
+    out = np.full(t_max.shape, cfg.max_depth_m)
+    out[t_max <= cfg.stable_K] = 0.0
+    wave = (t_max > cfg.stable_K) & (t_mean < cfg.stable_K)
+    ratio = (t_max[wave] - t_mean[wave]) / (cfg.stable_K - t_mean[wave])
+    out[wave] = np.minimum(cfg.skin_depth_m * np.log(ratio), cfg.max_depth_m)
+    return out
+
+
+def rim_factor(
+    shape,
+    *,
+    resolution_m: float,
+    x0_m: float,
+    y1_m: float,
+    craters,
+    config: IceConfig | None = None,
+) -> np.ndarray:
+    """``1 - prod_k (1 - a_k exp(-d_k / (falloff_radii R_k)))`` over the craters of
+    ``craters`` (x_m, y_m, diameter_m, age_yr arrays, site metres) of diameter >=
+    ``min_crater_m``, on a grid whose west edge is ``x0_m`` and north edge ``y1_m``.
+    Each crater is evaluated within ``(1 + 12 falloff_radii) R`` of its centre (its
+    factor is below 1e-5 beyond)."""
+    cfg = config or IceConfig()
+    rows, cols = shape
+    log_keep = np.zeros((rows, cols))
+    x = np.asarray(craters.x_m, np.float64)
+    y = np.asarray(craters.y_m, np.float64)
+    d = np.asarray(craters.diameter_m, np.float64)
+    age = np.asarray(craters.age_yr, np.float64)
+    sel = d >= cfg.min_crater_m
+    for cx, cy, dk, ak in zip(x[sel], y[sel], d[sel], age[sel], strict=True):
+        rad = 0.5 * dk
+        a = float(np.exp(-ak / cfg.age_scale_yr))
+        if a < 1e-6:
+            continue
+        reach = rad * (1.0 + 12.0 * cfg.falloff_radii)
+        c0 = max(0, int(np.floor((cx - reach - x0_m) / resolution_m)))
+        c1 = min(cols, int(np.ceil((cx + reach - x0_m) / resolution_m)) + 1)
+        r0 = max(0, int(np.floor((y1_m - (cy + reach)) / resolution_m)))
+        r1 = min(rows, int(np.ceil((y1_m - (cy - reach)) / resolution_m)) + 1)
+        if c0 >= c1 or r0 >= r1:
+            continue
+        xs = x0_m + (np.arange(c0, c1) + 0.5) * resolution_m
+        ys = y1_m - (np.arange(r0, r1) + 0.5) * resolution_m
+        dist = np.abs(np.hypot(xs[None, :] - cx, ys[:, None] - cy) - rad)
+        g = a * np.exp(-dist / (cfg.falloff_radii * rad))
+        log_keep[r0:r1, c0:c1] += np.log1p(-np.minimum(g, 1.0 - 1e-12))
+    return -np.expm1(log_keep)
+
+
+def ice_wt_pct(
+    dry_m: np.ndarray, rim: np.ndarray, *, config: IceConfig | None = None
+) -> np.ndarray:
+    """Water ice below the dry layer (wt%): ``background + rim_wt_pct * rim`` where the dry
+    layer is shallower than ``max_depth_m``, 0 elsewhere."""
+    cfg = config or IceConfig()
+    ice = cfg.background_wt_pct + cfg.rim_wt_pct * np.asarray(rim, np.float64)
+    return np.where(np.asarray(dry_m) < cfg.max_depth_m, ice, 0.0)
+
+
+__all__ = [
+    "dry_layer_m",
+    "frost_area_fraction",
+    "ice_wt_pct",
+    "label_patches",
+    "oh_ppm",
+    "rim_factor",
+]

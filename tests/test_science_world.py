@@ -1,0 +1,309 @@
+"""The science world model: layer relations, tile invariance, bad input, the CLI."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from lunar_drake.errors import OutOfRangeError
+from lunar_drake.science import thermal, volatiles
+from lunar_drake.science.config import FrostConfig, IceConfig, OHConfig, ThermalConfig, WorldConfig
+from lunar_drake.science.sun_envelope import envelope_from_samples
+from lunar_drake.science.world import Craters, WorldModelError, check_layer, compute_world
+
+RES = 0.25
+N = 128
+
+
+def _bowl_site():
+    """A 32 m plain (0.25 m px) with a 16 m wide, 1.6 m deep bowl and a Sun circling at
+    3 +- 1.5 deg."""
+    y, x = (np.mgrid[0:N, 0:N] + 0.5 - N / 2) * RES
+    r = np.hypot(x, y)
+    z = np.where(r < 8.0, -1.6 * (1 - (r / 8.0) ** 2) ** 2, 0.0)
+    k = np.arange(1461)
+    env = envelope_from_samples(
+        (k * 12 * 360 / 1461) % 360,
+        3.0 + 1.5 * np.sin(2 * np.pi * k / 1461),
+        np.full(k.size, 1.495978707e8),
+        bins=16,
+    )
+    craters = Craters(
+        x_m=np.array([0.0, 10.0]),
+        y_m=np.array([0.0, -10.0]),
+        diameter_m=np.array([16.0, 6.0]),
+        age_yr=np.array([1e8, 1e7]),
+    )
+    return z, r, env, craters
+
+
+@pytest.fixture(scope="module")
+def bowl_world():
+    z, r, env, craters = _bowl_site()
+    layers = compute_world(
+        z,
+        resolution_m=RES,
+        craters=craters,
+        seed=3,
+        envelope=env,
+        sun_azimuth_deg=120.0,
+        sun_elevation_deg=3.0,
+        config=WorldConfig(tile_px=4096),
+    )
+    return z, r, layers
+
+
+def test_frost_only_inside_permanent_shadow(bowl_world):
+    _z, r, L = bowl_world
+    frost, psr = L["frost_area_frac"], L["psr"]
+    assert psr[r < 6].mean() > 0.3 and psr[r > 9].max() == 0  # the bowl's floor, not the plain
+    assert (frost > 0).any()
+    assert np.all(psr[frost > 0] == 1)
+
+
+def test_frost_grows_with_patch_area():
+    psr = np.zeros((20, 20), np.uint8)
+    psr[1:3, 1:3] = 1  # 4 px = 4 m^2 at 1 m
+    psr[10:16, 10:16] = 1  # 36 m^2
+    cfg = FrostConfig(max_area_frac=0.2, area_scale_m2=20.0)
+    f = volatiles.frost_area_fraction(psr, np.full(psr.shape, 60.0), resolution_m=1.0, config=cfg)
+    assert f[1, 1] == pytest.approx(0.2 * (1 - math.exp(-4 / 20)))
+    assert f[12, 12] == pytest.approx(0.2 * (1 - math.exp(-36 / 20)))
+    assert f[12, 12] > f[1, 1] > 0 and f[5, 5] == 0
+    warm = volatiles.frost_area_fraction(
+        psr, np.full(psr.shape, 150.0), resolution_m=1.0, config=cfg
+    )
+    assert not warm.any()  # no frost where even the warmest moment is above 110 K
+
+
+def test_temperature_is_radiative_equilibrium_facing_the_sun():
+    # A plane sloping 30 deg down to the south, the Sun due south at 60 deg: normal
+    # incidence, no terrain above the tangent plane, 1 au.
+    south = (np.arange(64) + 0.5 - 32) * 0.5  # m south of the centre, by row (row 0 north)
+    z = np.repeat((-south * math.tan(math.radians(30)))[:, None], 64, axis=1)
+    cfg = ThermalConfig()
+    q = thermal.direct_flux_at(
+        z, resolution_m=0.5, sun_azimuth_deg=180.0, sun_elevation_deg=60.0, config=cfg, tile_px=4096
+    )
+    view = thermal.view_factor(z, resolution_m=0.5, config=cfg, tile_px=4096)
+    t = thermal.temperature(q, view=view, resolution_m=0.5, config=cfg)
+    # (1 - 0.12) 1361 W/m^2 + 16 mW/m^2 = 0.95 * 5.670374419e-8 T^4
+    expected = ((0.88 * 1361.0 + 0.016) / (0.95 * 5.670374419e-8)) ** 0.25
+    assert expected == pytest.approx(386.2, abs=0.1)
+    inner = t[8:-8, 8:-8]
+    assert np.allclose(inner, expected, atol=0.05)
+    assert view[8:-8, 8:-8].max() < 1e-3  # the 0.5 deg horizon resolution
+
+
+def test_shadow_is_warmed_by_sunlit_terrain(bowl_world):
+    z, r, _env, _craters = _bowl_site()
+    cfg = ThermalConfig()
+    view = thermal.view_factor(z, resolution_m=RES, config=cfg, tile_px=4096)
+    q = np.zeros(z.shape)
+    cold = thermal.temperature(q, view=view, resolution_m=RES, config=cfg)
+    q_lit = np.where(r > 9, 150.0, 0.0)  # only the plain is lit
+    warm = thermal.temperature(q_lit, view=view, resolution_m=RES, config=cfg)
+    floor = (0.016 / (0.95 * 5.670374419e-8)) ** 0.25
+    assert cold.min() == pytest.approx(floor) and cold.max() < floor + 0.5  # geothermal: ~23 K
+    assert warm[N // 2, N // 2 + 20] > floor + 20  # the bowl's wall sees the lit plain
+
+
+def test_oh_follows_temperature():
+    cfg = OHConfig(min_ppm=100.0, max_ppm=700.0, half_K=300.0, width_K=30.0)
+    t = np.array([40.0, 150.0, 250.0, 300.0, 350.0, 390.0])
+    oh = volatiles.oh_ppm(t, config=cfg)
+    assert np.all(np.diff(oh) < 0)
+    assert oh[3] == pytest.approx(400.0)
+    assert oh[0] == pytest.approx(100.0 + 600.0 / (1 + math.exp(-260.0 / 30.0)))
+    assert oh[-1] == pytest.approx(100.0 + 600.0 / (1 + math.exp(3.0)))
+
+
+def test_dry_layer_from_the_temperature_wave():
+    cfg = IceConfig(stable_K=110.0, skin_depth_m=0.05, max_depth_m=1.5)
+    t_max = np.array([90.0, 150.0, 250.0, 200.0])
+    t_mean = np.array([60.0, 80.0, 100.0, 130.0])
+    d = volatiles.dry_layer_m(t_max, t_mean, config=cfg)
+    assert d[0] == 0.0  # cold enough at the surface
+    assert d[1] == pytest.approx(0.05 * math.log(70.0 / 30.0))  # 80 + 70 e^(-z/0.05) = 110
+    assert d[2] == pytest.approx(0.05 * math.log(150.0 / 10.0))
+    assert d[3] == 1.5  # the mean is above 110 K: no stable ice within reach
+
+
+def test_ice_falls_with_distance_to_a_rim():
+    cfg = IceConfig(min_crater_m=5.0, falloff_radii=1.0, age_scale_yr=1e9)
+    craters = Craters(
+        x_m=np.array([0.0]),
+        y_m=np.array([0.0]),
+        diameter_m=np.array([10.0]),
+        age_yr=np.array([0.0]),
+    )
+    rim = volatiles.rim_factor(
+        (200, 200), resolution_m=0.2, x0_m=-20.0, y1_m=20.0, craters=craters, config=cfg
+    )
+    row = rim[100, 100:]  # eastwards from the centre; the rim at 5 m (column 25)
+    x = (np.arange(100) + 0.5) * 0.2
+    outside = x > 5.0
+    assert np.all(np.diff(row[outside]) < 0)
+    k = int(np.argmin(np.abs(x - 10.0)))  # one radius beyond the rim: e^-1
+    y = 20.0 - 100.5 * 0.2  # row 100's centre (m north)
+    assert row[k] == pytest.approx(math.exp(-(math.hypot(x[k], y) - 5.0) / 5.0), rel=1e-9)
+    ice = volatiles.ice_wt_pct(np.zeros_like(rim), rim, config=cfg)
+    assert ice[100, 125] > ice[100, 150] > ice[100, 199]
+    small = Craters(
+        x_m=np.array([0.0]), y_m=np.array([0.0]), diameter_m=np.array([4.0]), age_yr=np.array([0.0])
+    )
+    assert not volatiles.rim_factor(
+        (50, 50), resolution_m=0.2, x0_m=-5, y1_m=5, craters=small, config=cfg
+    ).any()
+    deep = volatiles.ice_wt_pct(np.full(rim.shape, 1.5), rim, config=cfg)
+    assert not deep.any()  # no ice where the dry layer reaches max_depth_m
+
+
+def test_tile_size_never_changes_a_byte():
+    z, _r, env, craters = _bowl_site()
+    out = []
+    for tile in (64, 4096):
+        out.append(
+            compute_world(
+                z,
+                resolution_m=RES,
+                craters=craters,
+                seed=3,
+                envelope=env,
+                sun_azimuth_deg=120.0,
+                sun_elevation_deg=3.0,
+                config=WorldConfig(tile_px=tile, workers=1 if tile == 64 else 2),
+            )
+        )
+    for name in out[0]:
+        assert out[0][name].tobytes() == out[1][name].tobytes(), name
+
+
+def test_minerals_are_tile_invariant_and_sum_to_100():
+    from lunar_drake.science.minerals import h_minerals_ppm, minerals_wt_pct
+
+    whole = minerals_wt_pct(5, window=(0, 0, 64, 64), resolution_m=0.5)
+    part = minerals_wt_pct(5, window=(16, 32, 20, 24), resolution_m=0.5)
+    assert part.tobytes() == whole[:, 16:36, 32:56].tobytes()
+    assert np.allclose(whole.sum(axis=0), 100.0)
+    h = h_minerals_ppm(5, window=(0, 0, 64, 64), resolution_m=0.5)
+    assert h.min() > 0 and h.std() > 0
+    assert not np.array_equal(h, h_minerals_ppm(6, window=(0, 0, 64, 64), resolution_m=0.5))
+
+
+def test_layers_outside_their_physical_range_are_refused():
+    with pytest.raises(WorldModelError, match=r"'temperature_K' spans \[-3, 20\] K"):
+        check_layer("temperature_K", np.array([-3.0, 20.0]))
+    with pytest.raises(WorldModelError, match="frost_area_frac"):
+        check_layer("frost_area_frac", np.array([0.2, 1.5]))
+    with pytest.raises(WorldModelError, match=r"NaN|nan"):
+        check_layer("ice_wt_pct", np.array([np.nan, 1.0]))
+    with pytest.raises(OutOfRangeError, match="bond_albedo"):
+        WorldConfig(thermal=ThermalConfig(bond_albedo=1.2)).validate()
+    with pytest.raises(OutOfRangeError, match="rim_wt_pct"):
+        IceConfig(background_wt_pct=60.0, rim_wt_pct=50.0).validate()
+
+
+def test_world_build_cli(small_site, tmp_path, capsys):
+    from lunar_drake.cli import main
+
+    _scenario, site = small_site
+    site_dir = site.site.directory
+    out = tmp_path / "world"
+    assert main(["world", "build", str(site_dir), "--out", str(out), "--no-progress"]) == 0
+    doc = json.loads((out / "world.json").read_text())
+    for name in (
+        "psr",
+        "temperature_K",
+        "frost_area_frac",
+        "oh_ppm",
+        "dry_layer_m",
+        "ice_wt_pct",
+        "h_minerals_ppm",
+        "minerals",
+    ):
+        assert (out / f"{name}.tif").is_file() and (out / f"{name}.png").is_file()
+        assert name in doc["layers"]
+    import rasterio
+
+    with rasterio.open(out / "minerals.tif") as ds:
+        assert ds.descriptions == ("plagioclase", "pyroxene", "olivine", "ilmenite")
+        assert ds.crs is not None
+    assert "World model of" in capsys.readouterr().out
+    # A site without a crater catalog: one line, exit 2.
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    (bare / "dem.tif").write_bytes((site_dir / "dem.tif").read_bytes())
+    assert main(["world", "build", str(bare), "--out", str(tmp_path / "w2"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no crater catalog" in err and len(err.splitlines()) == 1
+
+
+def test_world_config_file_and_bad_layers_on_disk(small_site, tmp_path, capsys):
+    from lunar_drake.cli import main
+    from lunar_drake.science.world import read_world_layer
+    from lunar_drake.terrain.geotiff import write_geotiff
+
+    _scenario, site = small_site
+    site_dir = str(site.site.directory)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("thermal: {bond_albedo: 1.5}\n")
+    assert (
+        main(
+            [
+                "world",
+                "build",
+                site_dir,
+                "--out",
+                str(tmp_path / "w"),
+                "--config",
+                str(bad),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
+    assert "bond_albedo = 1.5" in capsys.readouterr().err
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("thermal: {albedo: 0.1}\n")
+    assert (
+        main(
+            [
+                "world",
+                "build",
+                site_dir,
+                "--out",
+                str(tmp_path / "w"),
+                "--config",
+                str(typo),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
+    assert "albedo" in capsys.readouterr().err
+    good = tmp_path / "good.yaml"
+    good.write_text("sun: {azimuth_bins: 8}\nminerals: {scales_m: [20.0, 5.0]}\n")
+    out = tmp_path / "w"
+    assert (
+        main(
+            ["world", "build", site_dir, "--out", str(out), "--config", str(good), "--no-progress"]
+        )
+        == 0
+    )
+    doc = json.loads((out / "world.json").read_text())
+    assert doc["sun_envelope"]["azimuth_bins"] == 8
+    assert doc["config"]["minerals"]["scales_m"] == [20.0, 5.0]
+    t = read_world_layer(out, "temperature_K")
+    assert t.min() > 20.0
+    from affine import Affine
+
+    write_geotiff(
+        out / "temperature_K.tif",
+        np.full((4, 4), -5.0, np.float32),
+        transform=Affine(0.1, 0, 0, 0, -0.1, 0),
+        crs=site.heightfield.crs,
+    )
+    with pytest.raises(WorldModelError, match="temperature_K"):
+        read_world_layer(out, "temperature_K")
