@@ -191,7 +191,18 @@ def _cmd_run(args) -> int:
         print(f"Perception: {_plural(per['keyframes'], 'stereo keyframe')} (VO: {vo}); "
               f"{per['lethal_cells_added']} lethal cells added to the ground's map"
               f"{drift}")  # fmt: skip
+    sci = summary.get("science") or {}
+    if sci:
+        r = sci.get("nss_truth_r")
+        score = f"; against truth r = {r:.2f} over {sci['nss_cells']} cells of 2 m" if r else ""
+        print(f"Science: the ground received {_plural(sci['nss_records'], 'NSS record')}"
+              + (f", mean hydrogen {sci['weh_est_mean_wt_pct']:.2f} wt% WEH (truth "
+                 f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")
+              + score)  # fmt: skip
     files = outputs.run_files()
+    for name in ("nss.csv", "nss_map.png"):
+        if (out / name).exists():
+            files.append(name)
     if per.get("keyframes"):
         files.append("keyframes.csv")
     if (out / "ground_map.png").exists():

@@ -295,4 +295,31 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "perception": _perception(logs.keyframes),
         "camera_frames": int(logs.frames_written),
     }
+    if scenario.sensors.nss.enabled:
+        summary["science"] = science(scenario=scenario, site=site, logs=logs)
     return summary
+
+
+def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """NSS scoring on truth: records received, the ground's mean hydrogen estimate and
+    its correlation with the world model's footprint hydrogen at the true positions over
+    2 m cells (:func:`lunar_drake.science.products.nss_truth`)."""
+    from lunar_drake.science.products import nss_table, nss_truth
+    from lunar_drake.science.world import hydrogen_map
+
+    cfg = scenario.sensors.nss
+    table = nss_table(logs.science_received, config=cfg)
+    out = {"nss_records": len(table)}
+    if not len(table):
+        return out
+    pose = logs.vectors["truth.pose"]
+    t = nss_truth(table, truth_times=pose.times, truth_xy_yaw=pose.data[:, [0, 1, 5]],
+                  hmap=hydrogen_map(scenario=scenario, site=site), config=cfg)  # fmt: skip
+    out.update({
+        "weh_est_mean_wt_pct": _r(float(np.mean(table.weh_est))),
+        "weh_truth_mean_wt_pct": _r(float(np.mean(t["truth_weh"]))),
+        "nss_truth_r": None if t["r"] is None else _r(t["r"]),
+        "nss_cells": t["cells"],
+        "nss_rmse_wt_pct": None if t["rmse_wt_pct"] is None else _r(t["rmse_wt_pct"]),
+    })  # fmt: skip
+    return out

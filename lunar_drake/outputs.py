@@ -7,7 +7,9 @@ A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake ru
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
 the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
-mapping keyframes; with ground perception), ``ground_map.png`` (the ground's final
+mapping keyframes; with ground perception), ``nss.csv`` and ``nss_map.png`` (the
+neutron spectrometer's records as the ground received them and its hydrogen map; with
+``sensors.nss``), ``ground_map.png`` (the ground's final
 costmap round the traverse: :mod:`lunar_drake.ground_map`), ``calibration.yaml`` (the
 stereo rig, OpenCV style; with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
@@ -60,6 +62,8 @@ RUN_DIR_NAMES = frozenset(
         "ground_events.csv",
         "images.csv",
         "keyframes.csv",
+        "nss.csv",
+        "nss_map.png",
         "ground_map.png",
         "calibration.yaml",
         "frames",
@@ -85,6 +89,38 @@ def _quote(text: str) -> str:
     if "," in text or '"' in text:
         return '"' + text.replace('"', '""') + '"'
     return text
+
+
+#: ``nss.csv`` columns: reception and sample times (s), the sample index, epithermal and
+#: thermal counts over ``integration_s`` (s), the on-board pose estimate at the sample
+#: (m, m, rad) and the ground's water-equivalent hydrogen from the epithermal counts
+#: (wt%; :func:`lunar_drake.science.nss.weh_from_epithermal`).
+NSS_COLUMNS = ["t_received_s", "t_sample_s", "index", "epithermal_counts", "thermal_counts",
+               "integration_s", "x_est_m", "y_est_m", "yaw_est_rad", "weh_est_wt_pct"]  # fmt: skip
+
+
+def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> list[Path]:
+    """``nss.csv`` and ``nss_map.png`` from the records the ground received."""
+    from lunar_drake.science.nss import weh_from_epithermal
+    from lunar_drake.science.products import nss_map_png
+
+    cfg = scenario.sensors.nss
+    rows = []
+    for t_rx, r in logs.science_received:
+        if r.instrument != "nss":
+            continue
+        epi, th = r.values
+        weh = float(weh_from_epithermal(epi, r.integration_s, config=cfg))
+        p = r.pose_estimate
+        rows.append([f"{t_rx:.6f}", f"{r.t_sample_s:.6f}", str(r.index), f"{epi:.0f}",
+                     f"{th:.0f}", _fmt(r.integration_s), _fmt(p[0]), _fmt(p[1]), _fmt(p[5]),
+                     _fmt(weh)])  # fmt: skip
+    write_csv(out / "nss.csv", NSS_COLUMNS, rows)
+    paths = [out / "nss.csv"]
+    if rows:
+        nss_map_png(out / "nss_map.png", logs=logs, scenario=scenario)
+        paths.append(out / "nss_map.png")
+    return paths
 
 
 def run_files() -> list[str]:
@@ -164,6 +200,8 @@ def write_run(
     write_csv(out / "images.csv", ["t_received_s", "t_sent_s", "frame_index", "codec", "bytes"],
               rows)  # fmt: skip
     paths.append(out / "images.csv")
+    if logs.science_received:
+        paths += write_science(out, scenario=scenario, logs=logs)
     if logs.keyframes:
         from lunar_drake.perception.ground_pipeline import KeyframeRecord
 

@@ -40,6 +40,8 @@ from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, ch
 from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 from lunar_drake.perception.ground_pipeline import PerceptionConfig
 from lunar_drake.render.camera import CameraConfig
+from lunar_drake.science.config import WorldConfig
+from lunar_drake.science.nss import NSSConfig
 from lunar_drake.sensors.imu import ImuConfig
 from lunar_drake.sensors.star_tracker import StarTrackerConfig
 from lunar_drake.sensors.wheel_encoders import WheelEncoderConfig
@@ -160,12 +162,14 @@ class SensorsConfig:
     Attributes:
         imu: chassis IMU. star_tracker: chassis star tracker (boresight up).
         wheel_encoders: drive-joint encoders. camera: the mast stereo pair.
+        nss: the neutron spectrometer (science; reads the world model, ``science``).
     """
 
     imu: ImuConfig = dc.field(default_factory=ImuConfig)
     star_tracker: StarTrackerConfig = dc.field(default_factory=StarTrackerConfig)
     wheel_encoders: WheelEncoderConfig = dc.field(default_factory=WheelEncoderConfig)
     camera: CameraConfig = dc.field(default_factory=CameraConfig)
+    nss: NSSConfig = dc.field(default_factory=NSSConfig)
 
 
 @dc.dataclass
@@ -408,6 +412,8 @@ class Scenario:
             scenario's name when the file does not.
         random_seed: the one seed of every random stream (DESIGN.md decision 6).
         simulation_duration: simulated time (s).
+        science: the world model science instruments read (:mod:`lunar_drake.science`;
+            built on demand for the site and the epoch, and cached).
     """
 
     name: str = ""
@@ -424,6 +430,7 @@ class Scenario:
     comms: CommsConfig = dc.field(default_factory=CommsConfig)
     logging: LoggingConfig = dc.field(default_factory=LoggingConfig)
     terrain_view: TerrainViewConfig = dc.field(default_factory=TerrainViewConfig)
+    science: WorldConfig = dc.field(default_factory=WorldConfig)
     simulator_config: SimulatorConfig = dc.field(
         default_factory=lambda: SimulatorConfig(
             max_step_size=0.01, accuracy=1.0e-3, use_error_control=False, target_realtime_rate=0.0
@@ -481,6 +488,8 @@ def validate_scenario(s: Scenario) -> None:
     _section("sensors.star_tracker", s.sensors.star_tracker.validate)
     _section("sensors.wheel_encoders", s.sensors.wheel_encoders.validate)
     _section("sensors.camera", s.sensors.camera.validate)
+    _section("sensors.nss", s.sensors.nss.validate)
+    _section("science", s.science.validate)
     li = s.lighting
     check_range(
         "lighting.ephemeris_update_s", li.ephemeris_update_s, 0.0, 86400.0, lo_open=True, unit=" s"

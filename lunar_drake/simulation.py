@@ -103,6 +103,8 @@ class SimulationLogs:
             ground (:data:`~lunar_drake.autonomy.operations.GOAL_STATUS`).
         images_received: the stereo frames the ground received, (t_received_s,
             t_sent_s, frame_index, codec, bytes) each.
+        science_received: the instrument records the ground received, (t_received_s,
+            :class:`~lunar_drake.comms.science.ScienceRecord`) each, in sample order.
         keyframes: the ground perception's processed keyframes
             (:class:`~lunar_drake.perception.ground_pipeline.KeyframeRecord`).
         ground_costmap: the ground's final costmap (a-priori + stereo hazards), or None
@@ -123,6 +125,7 @@ class SimulationLogs:
     ground_events: list = dc.field(default_factory=list)
     ground_goals: list = dc.field(default_factory=list)
     images_received: list = dc.field(default_factory=list)
+    science_received: list = dc.field(default_factory=list)
     keyframes: list = dc.field(default_factory=list)
     ground_costmap: object = None
 
@@ -318,6 +321,11 @@ def simulate(
              d.message.payload.codec, d.message.size_bytes)
             for d in rx.received(rx.GetMyContextFromRoot(root))
         ]  # fmt: skip
+    science = []
+    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.science"):
+        rx = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.science")
+        science = [(d.t_received_s, d.message.payload)
+                   for d in rx.received(rx.GetMyContextFromRoot(root))]  # fmt: skip
     keyframes, costmap = [], None
     if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.perception"):
         gp = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.perception")
@@ -335,6 +343,7 @@ def simulate(
         ground_events=ops.events.items(),
         ground_goals=[(g, st) for g, st in zip(ops.goals, ops.status, strict=True)],
         images_received=images,
+        science_received=science,
         keyframes=keyframes,
         ground_costmap=costmap,
         wall={

@@ -4,11 +4,13 @@ Wiring only. Ports (``<subsystem>.<signal>``):
 
 * inputs -- sensors ``rover.imu``, ``rover.star_tracker``, ``rover.wheel_encoders`` and
   the uplink inbox ``uplink.commands`` and, when it sends frames down, the camera's
-  ``camera.frame_index``, ``camera.left.raw``, ``camera.right.raw``;
+  ``camera.frame_index``, ``camera.left.raw``, ``camera.right.raw``; with the neutron
+  spectrometer, ``rover.nss``;
 * outputs -- actuator commands ``rover.wheel_speed_command``,
   ``rover.steer_angle_command`` (explicit steer), ``rover.gimbal_command``,
   ``rover.brake_command``; the downlink outboxes ``downlink.telemetry`` (and
-  ``downlink.images``: compressed stereo frames); and the on-board
+  ``downlink.images``: compressed stereo frames; ``downlink.science``: instrument
+  records); and the on-board
   records ``flight.twist_command``, ``flight.brake_command``, ``flight.pose_estimate``,
   ``flight.pose_covariance``, ``flight.status`` (mode, command seq, safe reason, mode
   changes) and ``flight.bumper`` (the virtual bumper's trip) for logging.
@@ -26,6 +28,7 @@ from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
 from lunar_drake.systems.image_downlink import ImagePacketizer
 from lunar_drake.systems.rover_kinematics import RoverKinematics
+from lunar_drake.systems.science_downlink import SciencePacketizer
 from lunar_drake.systems.state_estimator import StateEstimator
 from lunar_drake.systems.telemetry import TelemetryPacketizer
 from lunar_drake.systems.virtual_bumper import VirtualBumper
@@ -34,6 +37,20 @@ from lunar_drake.systems.virtual_bumper import VirtualBumper
 FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "uplink.commands")
 #: Camera sensor inputs, when it sends frames down (:func:`sends_images`).
 IMAGE_INPUTS = ("camera.frame_index", "camera.left.raw", "camera.right.raw")
+#: Science instrument inputs, when the rover carries them (:func:`sends_science`).
+SCIENCE_INPUTS = ("rover.nss",)
+
+
+def sends_science(scenario: Scenario) -> bool:
+    """True when the rover carries the neutron spectrometer and sends its records down."""
+    return scenario.sensors.nss.enabled
+
+
+def science_timing(scenario: Scenario) -> tuple[float, float]:
+    """(period, offset) s of the science packetizer: just after each NSS sample."""
+    nss = scenario.sensors.nss
+    period = 1.0 / nss.rate_hz
+    return period, (nss.delay_s % period) + 1e-6
 
 
 def sends_images(scenario: Scenario) -> bool:
@@ -44,7 +61,11 @@ def sends_images(scenario: Scenario) -> bool:
 
 def flight_inputs(scenario: Scenario) -> tuple:
     """The flight diagram's inputs for ``scenario``."""
-    return FLIGHT_INPUTS + (IMAGE_INPUTS if sends_images(scenario) else ())
+    return (
+        FLIGHT_INPUTS
+        + (IMAGE_INPUTS if sends_images(scenario) else ())
+        + (SCIENCE_INPUTS if sends_science(scenario) else ())
+    )
 
 
 def image_timing(scenario: Scenario) -> tuple[float, float]:
@@ -140,6 +161,16 @@ def MakeFlightDiagram(*, scenario: Scenario):
         builder.Connect(odometry.pose_estimate_output, images.pose_input)
         builder.Connect(gimbal.gimbal_command_output, images.gimbal_input)
         builder.ExportOutput(images.images_output, "downlink.images")
+    if sends_science(scenario):
+        nss = scenario.sensors.nss
+        science = builder.AddNamedSystem(
+            "flight.science",
+            SciencePacketizer(instrument="nss", n_values=2, rate_hz=nss.rate_hz,
+                              delay_s=nss.delay_s),
+        )
+        builder.ExportInput(science.values_input, "rover.nss")
+        builder.Connect(odometry.pose_estimate_output, science.pose_input)
+        builder.ExportOutput(science.science_output, "downlink.science")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")
     builder.ExportOutput(odometry.pose_estimate_output, "flight.pose_estimate")
     builder.ExportOutput(odometry.pose_covariance_output, "flight.pose_covariance")

@@ -19,15 +19,17 @@ from pydrake.systems.framework import DiagramBuilder
 from lunar_drake.autonomy.commands import DriveCommand, GotoCommand
 from lunar_drake.autonomy.operations import OperatorParams, Request, goal_shift_limit_m
 from lunar_drake.autonomy.planner import PlanningError
-from lunar_drake.diagrams.flight import sends_images
+from lunar_drake.diagrams.flight import sends_images, sends_science
 from lunar_drake.errors import OutOfBoundsError
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.ground_operator import GroundOperator, plan_waypoints
 from lunar_drake.systems.ground_perception import GroundPerception
 from lunar_drake.systems.image_downlink import ImageReceiver
+from lunar_drake.systems.science_downlink import ScienceReceiver
 from lunar_drake.systems.telemetry import TelemetryReceiver
 
-#: The inputs of the ground software (``downlink.images`` too when frames come down).
+#: The inputs of the ground software (``downlink.images`` too when frames come down,
+#: ``downlink.science`` when instrument records do).
 GROUND_INPUTS = ("downlink.telemetry",)
 
 
@@ -268,6 +270,10 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
             if g.perception.use_vo:
                 builder.Connect(perception.pose_correction_output, operator.pose_correction_input)
             builder.ExportOutput(perception.pose_correction_output, "ground.pose_correction")
+    if sends_science(scenario):
+        science = builder.AddNamedSystem("ground.science", ScienceReceiver(rate_hz=g.rate_hz))
+        builder.ExportInput(science.science_input, "downlink.science")
+        builder.ExportOutput(science.records_received_output, "ground.science_received")
     diagram = builder.Build()
     diagram.set_name("ground")
     return diagram

@@ -19,7 +19,13 @@ from __future__ import annotations
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.comms.light_time import light_time_s
-from lunar_drake.diagrams.flight import MakeFlightDiagram, image_timing, sends_images
+from lunar_drake.diagrams.flight import (
+    MakeFlightDiagram,
+    image_timing,
+    science_timing,
+    sends_images,
+    sends_science,
+)
 from lunar_drake.diagrams.ground import MakeGroundDiagram
 from lunar_drake.diagrams.plant import MakePlantDiagram
 from lunar_drake.ephemeris.sun_earth import SiteLocation
@@ -61,6 +67,7 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
             topics={
                 "telemetry": 1.0 / scenario.flight.telemetry_rate_hz,
                 **({"images": image_timing(scenario)} if sends_images(scenario) else {}),
+                **({"science": science_timing(scenario)} if sends_science(scenario) else {}),
             },
             config=scenario.comms.downlink,
             seed=scenario.random_seed,
@@ -83,6 +90,9 @@ def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     if sends_images(scenario):
         builder.Connect(flight.GetOutputPort("downlink.images"), downlink.inputs["images"])
         builder.Connect(downlink.outputs["images"], ground.GetInputPort("downlink.images"))
+    if sends_science(scenario):
+        builder.Connect(flight.GetOutputPort("downlink.science"), downlink.inputs["science"])
+        builder.Connect(downlink.outputs["science"], ground.GetInputPort("downlink.science"))
     if plant.HasOutputPort("radio.earth_visible"):  # loss of signal behind terrain
         for link in (uplink, downlink):
             builder.Connect(plant.GetOutputPort("radio.earth_visible"), link.earth_visible_input)

@@ -6,7 +6,8 @@ ports are named ``<subsystem>.<signal>``:
 * inputs -- actuator commands: ``rover.wheel_speed_command`` (4, rad/s),
   ``rover.steer_angle_command`` (4, rad; explicit steer only), ``rover.gimbal_command``
   (2: pan, tilt, rad), ``rover.brake_command`` (1: >= 0.5 engages the wheel brakes);
-* sensor outputs -- :data:`SENSOR_PORTS` and, with cameras,
+* sensor outputs -- :data:`SENSOR_PORTS`, ``rover.nss`` (2: epithermal and thermal
+  counts) when ``sensors.nss.enabled`` and, with cameras,
   ``camera.{left,right}.{raw,preview}`` and ``camera.frame_index``;
 * truth outputs -- :data:`TRUTH_PORTS` and, with cameras,
   ``truth.camera.{left,right}.{depth,label}``: ground truth for scoring and logging only.
@@ -51,6 +52,8 @@ from lunar_drake.systems.wheel_regolith_contact import WheelRegolithContact
 
 #: Sensor outputs (what flight software may read).
 SENSOR_PORTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders")
+#: Science instrument outputs, when the rover carries them (sensors too).
+INSTRUMENT_PORTS = ("rover.nss",)
 
 #: Ground-truth outputs (scoring and logging only).
 TRUTH_PORTS = (
@@ -138,6 +141,8 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
 
     _add_actuators(builder, plant=plant, rover=rover, time_step_s=scenario.plant_config.time_step)
     _add_sensors(builder, scenario=scenario, plant=plant, rover=rover)
+    if scenario.sensors.nss.enabled:
+        _add_nss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
     _add_truth(builder, plant=plant, rover=rover, contact=contact)
     if scenario.comms.line_of_sight.enabled:
         los_cfg = scenario.comms.line_of_sight
@@ -282,6 +287,26 @@ def _add_sensors(builder, *, scenario: Scenario, plant, rover: RoverModel) -> No
     builder.Connect(plant.get_state_output_port(), sel.get_input_port())
     builder.Connect(sel.get_output_port(), enc.wheel_angles_input)
     builder.ExportOutput(enc.measurement_output, "rover.wheel_encoders")
+
+
+def _add_nss(builder, *, scenario: Scenario, plant, rover: RoverModel, site) -> None:
+    """The neutron spectrometer, reading the site's world model (built and cached on
+    first use) at the chassis' true pose: ``rover.nss`` (2: epithermal, thermal counts)."""
+    from lunar_drake.science.world import hydrogen_map
+    from lunar_drake.systems.neutron_spectrometer import NeutronSpectrometer
+
+    nss = builder.AddNamedSystem(
+        "rover.nss",
+        NeutronSpectrometer(
+            body_index=rover.chassis.index(),
+            hmap=hydrogen_map(scenario=scenario, site=site),
+            seed=scenario.random_seed,
+            name="rover.nss",
+            config=scenario.sensors.nss,
+        ),
+    )
+    builder.Connect(plant.get_body_poses_output_port(), nss.body_poses_input)
+    builder.ExportOutput(nss.measurement_output, "rover.nss")
 
 
 def _add_truth(builder, *, plant, rover: RoverModel, contact) -> None:

@@ -415,6 +415,61 @@ def _write_named_bands(path: Path, arr, *, names, transform, crs) -> None:
             tmp.unlink()
 
 
+def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
+    """Cache key of a site's world model: its ``site.json`` (what determines the site's
+    bytes), the epoch and the configuration (tile size and workers excluded: they never
+    change a byte)."""
+    import hashlib
+
+    site_dir = Path(site_dir)
+    try:
+        site_text = (site_dir / "site.json").read_text()
+    except OSError:
+        raise WorldModelError(
+            f"site {str(site_dir)!r} has no site.json; the world model needs a site from "
+            "'lunar-drake terrain synth'"
+        ) from None
+    cfg = dc.asdict(config)
+    cfg.pop("tile_px"), cfg.pop("workers")
+    text = json.dumps({"site": site_text, "utc": utc, "config": cfg}, sort_keys=True)
+    return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+def cached_world(site_dir, *, utc: str, config: WorldConfig | None = None, names=None,
+                 progress: bool = False) -> dict:
+    """The layers ``names`` (default all) of a site's world model at ``utc``, built on
+    first use into ``<cache>/worlds/<key>`` (see :func:`world_key`; ``cache`` as for
+    sites, $LUNAR_DRAKE_CACHE) and read from there afterwards (range-checked)."""
+    from lunar_drake.files import staged_directory
+    from lunar_drake.site import cache_root
+
+    cfg = config or WorldConfig()
+    d = cache_root() / "worlds" / world_key(site_dir, utc=utc, config=cfg)
+    if not (d / "world.json").is_file():
+        d.parent.mkdir(parents=True, exist_ok=True)
+        with staged_directory(d) as tmp:
+            build_world(site_dir=site_dir, out_dir=tmp, utc=utc, config=cfg, png=False,
+                        progress=progress)
+    return {n: read_world_layer(d, n) for n in (names or LAYERS)}
+
+
+def hydrogen_map(*, scenario, site, progress: bool = False):
+    """The :class:`~lunar_drake.science.nss.HydrogenMap` of a run's site at its epoch
+    (the world model, built on first use and cached: :func:`cached_world`)."""
+    from lunar_drake.science.nss import HydrogenMap
+
+    directory = site.site.directory
+    if directory is None or not (Path(directory) / "craters.csv").is_file():
+        raise WorldModelError(
+            f"sensors.nss needs a synthesized site with a crater catalog; the site "
+            f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
+        )
+    layers = cached_world(directory, utc=scenario.site.epoch_utc, config=scenario.science,
+                          names=("dry_layer_m", "ice_wt_pct", "h_minerals_ppm"),
+                          progress=progress)
+    return HydrogenMap.centred(**layers, resolution_m=site.heightfield.resolution_m)
+
+
 def read_world_layer(out_dir, name: str) -> np.ndarray:
     """One layer of a built world (checked against its physical range)."""
     from lunar_drake.terrain.geotiff import open_raster
@@ -551,12 +606,15 @@ __all__ = [
     "World",
     "WorldModelError",
     "build_world",
+    "cached_world",
     "check_layer",
     "compute_world",
     "default_utc",
     "heat_map",
+    "hydrogen_map",
     "overview",
     "read_craters",
     "read_world_layer",
+    "world_key",
     "write_world",
 ]

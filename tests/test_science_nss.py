@@ -1,0 +1,80 @@
+"""NSS core: depth and footprint weighting against quadrature, count rates, Poisson
+counts and the ground's inversion."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate, stats
+
+from lunar_drake.errors import OutOfBoundsError, OutOfRangeError
+from lunar_drake.science import nss
+
+
+def _map(dry, ice, h, res):
+    return nss.HydrogenMap.centred(
+        dry_layer_m=dry, ice_wt_pct=ice, h_minerals_ppm=h, resolution_m=res
+    )
+
+
+def test_depth_weight_matches_quadrature():
+    cfg = nss.NSSConfig(depth_scale_m=0.25, max_depth_m=1.0)
+    for d in (0.0, 0.1, 0.4, 0.99, 1.0, 1.3):
+        num, _ = integrate.quad(lambda z: math.exp(-z / 0.25), min(d, 1.0), 1.0)
+        den, _ = integrate.quad(lambda z: math.exp(-z / 0.25), 0.0, 1.0)
+        assert nss.ice_depth_weight(d, config=cfg) == pytest.approx(num / den, abs=1e-12)
+
+
+def test_footprint_weight_matches_the_solid_angle_integral():
+    # Ice only within rho of the detector: its share of the footprint is
+    # (1 - h / sqrt(h^2 + rho^2)) / (1 - h / sqrt(h^2 + R^2)) in the continuum.
+    cfg = nss.NSSConfig(height_m=0.5, footprint_radius_m=2.0)
+    res, n = 0.01, 500
+    y, x = (np.mgrid[0:n, 0:n] + 0.5 - n / 2) * res
+    rho = 0.8
+    ice = np.where(np.hypot(x, y) <= rho, 3.0, 0.0)
+    hmap = _map(np.zeros((n, n)), ice, np.zeros((n, n)), res)
+    got = nss.footprint_weh(hmap, 0.0, 0.0, config=cfg)
+    h, R = 0.5, 2.0
+    share = (1 - h / math.hypot(h, rho)) / (1 - h / math.hypot(h, R))
+    assert got == pytest.approx(3.0 * share, rel=5e-3)
+    uniform = _map(np.full((n, n), 0.3), np.full((n, n), 2.0), np.full((n, n), 100.0), res)
+    expected = 100.0 * nss.WEH_PER_H_PPM + 2.0 * nss.ice_depth_weight(0.3, config=cfg)
+    assert nss.footprint_weh(uniform, 0.4, -0.7, config=cfg) == pytest.approx(expected)
+    with pytest.raises(OutOfBoundsError, match="outside the world model"):
+        nss.footprint_weh(uniform, 40.0, 0.0, config=cfg)
+
+
+def test_count_rates_fall_as_hydrogen_rises():
+    cfg = nss.NSSConfig()
+    w = np.linspace(0.0, 10.0, 41)
+    epi, th = nss.count_rates(w, config=cfg)
+    assert np.all(np.diff(epi) < 0)
+    assert epi[0] == cfg.epithermal_dry_cps
+    assert np.all(np.diff(th) > 0) and th[-1] < 2.0 * cfg.thermal_dry_cps  # saturates
+    back = nss.weh_from_epithermal(epi * 2.0, 2.0, config=cfg)
+    assert np.allclose(back, w)
+
+
+def test_counts_are_poisson():
+    cfg = nss.NSSConfig(rate_hz=2.0)
+    mu_epi, mu_th = (r * 0.5 for r in nss.count_rates(2.0, config=cfg))
+    g = np.random.default_rng(7)
+    draws = np.array([nss.draw_counts(2.0, g, config=cfg) for _ in range(4000)])
+    for k, mu in enumerate((mu_epi, mu_th)):
+        c = draws[:, k]
+        assert c.mean() == pytest.approx(mu, rel=0.01)
+        assert c.var() / c.mean() == pytest.approx(1.0, abs=0.08)  # dispersion index
+        # Goodness of fit to Poisson(mu) over the central bins.
+        edges = np.arange(int(mu - 3 * math.sqrt(mu)), int(mu + 3 * math.sqrt(mu)))
+        obs = np.array([(c == e).sum() for e in edges])
+        exp = 4000 * stats.poisson.pmf(edges, mu)
+        chi2 = ((obs - exp) ** 2 / exp).sum()
+        assert chi2 < stats.chi2.ppf(0.999, edges.size - 1)
+
+
+def test_bad_nss_config():
+    with pytest.raises(OutOfRangeError, match="height_m"):
+        nss.NSSConfig(height_m=0.0).validate()
+    with pytest.raises(OutOfRangeError, match="rate_hz"):
+        nss.NSSConfig(rate_hz=0.0).validate()
