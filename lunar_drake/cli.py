@@ -192,7 +192,11 @@ def _cmd_run(args) -> int:
               f"{per['lethal_cells_added']} lethal cells added to the ground's map"
               f"{drift}")  # fmt: skip
     sci = summary.get("science") or {}
-    if sci:
+    if "nirvss_records" in sci:
+        rmse = sci.get("lcs_rmse_K")
+        print(f"Science: the ground received {_plural(sci['nirvss_records'], 'NIRVSS record')}"
+              + (f"; LCS {rmse:.2f} K RMS from the truth" if rmse is not None else ""))  # fmt: skip
+    if "nss_records" in sci:
         r = sci.get("nss_truth_r")
         score = f"; against truth r = {r:.2f} over {sci['nss_cells']} cells of 2 m" if r else ""
         print(f"Science: the ground received {_plural(sci['nss_records'], 'NSS record')}"
@@ -200,7 +204,7 @@ def _cmd_run(args) -> int:
                  f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")
               + score)  # fmt: skip
     files = outputs.run_files()
-    for name in ("nss.csv", "nss_map.png"):
+    for name in ("nss.csv", "nss_map.png", "nirvss.csv", "lcs.csv"):
         if (out / name).exists():
             files.append(name)
     if per.get("keyframes"):

@@ -295,9 +295,32 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "perception": _perception(logs.keyframes),
         "camera_frames": int(logs.frames_written),
     }
-    if scenario.sensors.nss.enabled:
+    if scenario.sensors.nss.enabled or scenario.sensors.nirvss.enabled:
         summary["science"] = science(scenario=scenario, site=site, logs=logs)
     return summary
+
+
+def _lcs(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """NIRVSS records received, and the LCS temperature against the world model's spot
+    temperature at the true position (RMSE, K)."""
+    from lunar_drake.science.nirvss import spot_means
+    from lunar_drake.science.world import surface_map
+
+    recs = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
+    out = {"nirvss_records": len(recs)}
+    if not recs:
+        return out
+    cfg = scenario.sensors.nirvss
+    smap = surface_map(scenario=scenario, site=site)
+    pose = logs.vectors["truth.pose"]
+    err = []
+    for r in recs:
+        x, y, yaw = (np.interp(r.t_sample_s, pose.times, pose.data[:, k]) for k in (0, 1, 5))
+        spot = spot_means(smap, x + cfg.x_m * math.cos(yaw), y + cfg.x_m * math.sin(yaw),
+                          radius_m=cfg.spot_radius_m)  # fmt: skip
+        err.append(r.values[-1] - spot["temperature_K"])
+    out["lcs_rmse_K"] = _r(float(np.sqrt(np.mean(np.square(err)))))
+    return out
 
 
 def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
@@ -307,9 +330,14 @@ def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     from lunar_drake.science.products import nss_table, nss_truth
     from lunar_drake.science.world import hydrogen_map
 
+    out = {}
+    if scenario.sensors.nirvss.enabled:
+        out.update(_lcs(scenario=scenario, site=site, logs=logs))
+    if not scenario.sensors.nss.enabled:
+        return out
     cfg = scenario.sensors.nss
     table = nss_table(logs.science_received, config=cfg)
-    out = {"nss_records": len(table)}
+    out["nss_records"] = len(table)
     if not len(table):
         return out
     pose = logs.vectors["truth.pose"]

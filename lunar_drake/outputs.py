@@ -9,7 +9,8 @@ ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo 
 the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
 mapping keyframes; with ground perception), ``nss.csv`` and ``nss_map.png`` (the
 neutron spectrometer's records as the ground received them and its hydrogen map; with
-``sensors.nss``), ``ground_map.png`` (the ground's final
+``sensors.nss``), ``nirvss.csv`` and ``lcs.csv`` (NIRVSS band depths and the LCS
+temperature as received; with ``sensors.nirvss``), ``ground_map.png`` (the ground's final
 costmap round the traverse: :mod:`lunar_drake.ground_map`), ``calibration.yaml`` (the
 stereo rig, OpenCV style; with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
@@ -64,6 +65,8 @@ RUN_DIR_NAMES = frozenset(
         "keyframes.csv",
         "nss.csv",
         "nss_map.png",
+        "nirvss.csv",
+        "lcs.csv",
         "ground_map.png",
         "calibration.yaml",
         "frames",
@@ -99,8 +102,35 @@ NSS_COLUMNS = ["t_received_s", "t_sample_s", "index", "epithermal_counts", "ther
                "integration_s", "x_est_m", "y_est_m", "yaw_est_rad", "weh_est_wt_pct"]  # fmt: skip
 
 
+#: ``nirvss.csv`` columns: times (s), index, the band depths (-) of
+#: :data:`lunar_drake.science.nirvss.BANDS`, the on-board pose estimate (m, m, rad).
+#: ``lcs.csv``: times, index, the LCS surface temperature (K), the estimate (m, m).
+def _nirvss_columns() -> list[str]:
+    from lunar_drake.science.nirvss import BANDS
+
+    return ["t_received_s", "t_sample_s", "index", *(f"bd_{b}" for b in BANDS), "x_est_m",
+            "y_est_m", "yaw_est_rad"]  # fmt: skip
+
+
+LCS_COLUMNS = ["t_received_s", "t_sample_s", "index", "temperature_K", "x_est_m", "y_est_m"]
+
+
 def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> list[Path]:
-    """``nss.csv`` and ``nss_map.png`` from the records the ground received."""
+    """``nss.csv`` and ``nss_map.png``, ``nirvss.csv`` and ``lcs.csv`` from the records
+    the ground received (each only when its instrument is carried)."""
+    paths = []
+    if scenario.sensors.nirvss.enabled:
+        nir = [(t, r) for t, r in logs.science_received if r.instrument == "nirvss"]
+        rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(r.index), *(_fmt(v) for v in r.values[:-1]),
+                 _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1]), _fmt(r.pose_estimate[5])]
+                for t, r in nir)  # fmt: skip
+        write_csv(out / "nirvss.csv", _nirvss_columns(), rows)
+        rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(r.index), _fmt(r.values[-1]),
+                 _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1])] for t, r in nir)  # fmt: skip
+        write_csv(out / "lcs.csv", LCS_COLUMNS, rows)
+        paths += [out / "nirvss.csv", out / "lcs.csv"]
+    if not scenario.sensors.nss.enabled:
+        return paths
     from lunar_drake.science.nss import weh_from_epithermal
     from lunar_drake.science.products import nss_map_png
 
@@ -116,7 +146,7 @@ def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> lis
                      f"{th:.0f}", _fmt(r.integration_s), _fmt(p[0]), _fmt(p[1]), _fmt(p[5]),
                      _fmt(weh)])  # fmt: skip
     write_csv(out / "nss.csv", NSS_COLUMNS, rows)
-    paths = [out / "nss.csv"]
+    paths.append(out / "nss.csv")
     if rows:
         nss_map_png(out / "nss_map.png", logs=logs, scenario=scenario)
         paths.append(out / "nss_map.png")

@@ -41,6 +41,7 @@ from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 from lunar_drake.perception.ground_pipeline import PerceptionConfig
 from lunar_drake.render.camera import CameraConfig
 from lunar_drake.science.config import WorldConfig
+from lunar_drake.science.nirvss import NIRVSSConfig
 from lunar_drake.science.nss import NSSConfig
 from lunar_drake.sensors.imu import ImuConfig
 from lunar_drake.sensors.star_tracker import StarTrackerConfig
@@ -163,6 +164,7 @@ class SensorsConfig:
         imu: chassis IMU. star_tracker: chassis star tracker (boresight up).
         wheel_encoders: drive-joint encoders. camera: the mast stereo pair.
         nss: the neutron spectrometer (science; reads the world model, ``science``).
+        nirvss: the near-infrared volatiles spectrometer and its LCS (same).
     """
 
     imu: ImuConfig = dc.field(default_factory=ImuConfig)
@@ -170,6 +172,7 @@ class SensorsConfig:
     wheel_encoders: WheelEncoderConfig = dc.field(default_factory=WheelEncoderConfig)
     camera: CameraConfig = dc.field(default_factory=CameraConfig)
     nss: NSSConfig = dc.field(default_factory=NSSConfig)
+    nirvss: NIRVSSConfig = dc.field(default_factory=NIRVSSConfig)
 
 
 @dc.dataclass
@@ -489,6 +492,7 @@ def validate_scenario(s: Scenario) -> None:
     _section("sensors.wheel_encoders", s.sensors.wheel_encoders.validate)
     _section("sensors.camera", s.sensors.camera.validate)
     _section("sensors.nss", s.sensors.nss.validate)
+    _section("sensors.nirvss", s.sensors.nirvss.validate)
     _section("science", s.science.validate)
     li = s.lighting
     check_range(

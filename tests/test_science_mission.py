@@ -15,7 +15,7 @@ from lunar_drake.scenario_files import apply_overrides
 from lunar_drake.science.nss import HydrogenMap, NSSConfig, count_rates
 from lunar_drake.systems.neutron_spectrometer import NeutronSpectrometer
 
-NSS_ON = "{sensors: {nss: {enabled: true, rate_hz: 2.0}}}"
+NSS_ON = "{sensors: {nss: {enabled: true, rate_hz: 2.0}, nirvss: {enabled: true}}}"
 
 
 def _counts(ice_wt_pct: float, seconds: float = 30.0) -> np.ndarray:
@@ -67,14 +67,24 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
         if dst is ground and dst.get_input_port(k).get_name() == "downlink.science":
             assert (src.get_name(), name) == ("downlink", "science")
     logs = simulate(scenario=apply_overrides(s, "{simulation_duration: 4.0}"), site=site)
-    recs = [r for _t, r in logs.science_received]
+    recs = [r for _t, r in logs.science_received if r.instrument == "nss"]
     assert [r.index for r in recs] == list(range(len(recs))) and len(recs) >= 7
+    nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
+    assert [r.index for r in nir] == list(range(len(nir))) and len(nir) >= 2
     assert all(t >= r.t_sample_s for t, r in logs.science_received)  # after the link
     summary = metrics.summarize(scenario=s, site=site, logs=logs)
     assert summary["science"]["nss_records"] == len(recs)
+    assert summary["science"]["nirvss_records"] == len(nir)
+    assert 0.3 < summary["science"]["lcs_rmse_K"] < 3.0  # the 1 K noise, a few samples
     outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall)
     with open(tmp_path / "nss.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == outputs.NSS_COLUMNS and len(rows) == len(recs)
     assert float(rows[3]["epithermal_counts"]) > 0
     assert (tmp_path / "nss_map.png").stat().st_size > 1000
+    with open(tmp_path / "nirvss.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(nir) and "bd_oh" in rows[0] and float(rows[-1]["bd_oh"]) > 0
+    with open(tmp_path / "lcs.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(nir) and 20.0 < float(rows[-1]["temperature_K"]) < 450.0

@@ -5,7 +5,7 @@ Wiring only. Ports (``<subsystem>.<signal>``):
 * inputs -- sensors ``rover.imu``, ``rover.star_tracker``, ``rover.wheel_encoders`` and
   the uplink inbox ``uplink.commands`` and, when it sends frames down, the camera's
   ``camera.frame_index``, ``camera.left.raw``, ``camera.right.raw``; with the neutron
-  spectrometer, ``rover.nss``;
+  spectrometer or NIRVSS, ``rover.nss`` / ``rover.nirvss``;
 * outputs -- actuator commands ``rover.wheel_speed_command``,
   ``rover.steer_angle_command`` (explicit steer), ``rover.gimbal_command``,
   ``rover.brake_command``; the downlink outboxes ``downlink.telemetry`` (and
@@ -28,7 +28,7 @@ from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
 from lunar_drake.systems.image_downlink import ImagePacketizer
 from lunar_drake.systems.rover_kinematics import RoverKinematics
-from lunar_drake.systems.science_downlink import SciencePacketizer
+from lunar_drake.systems.science_downlink import TICK_S, Instrument, SciencePacketizer
 from lunar_drake.systems.state_estimator import StateEstimator
 from lunar_drake.systems.telemetry import TelemetryPacketizer
 from lunar_drake.systems.virtual_bumper import VirtualBumper
@@ -37,20 +37,28 @@ from lunar_drake.systems.virtual_bumper import VirtualBumper
 FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "uplink.commands")
 #: Camera sensor inputs, when it sends frames down (:func:`sends_images`).
 IMAGE_INPUTS = ("camera.frame_index", "camera.left.raw", "camera.right.raw")
-#: Science instrument inputs, when the rover carries them (:func:`sends_science`).
-SCIENCE_INPUTS = ("rover.nss",)
+#: Values each science instrument reports (``rover.<name>`` sensor ports).
+INSTRUMENT_VALUES = {"nss": 2, "nirvss": 8}
+
+
+def instruments(scenario: Scenario) -> list[Instrument]:
+    """The science instruments the rover carries (``sensors.nss``, ``sensors.nirvss``)."""
+    out = []
+    for name, n in INSTRUMENT_VALUES.items():
+        cfg = getattr(scenario.sensors, name)
+        if cfg.enabled:
+            out.append(Instrument(name=name, n_values=n, rate_hz=cfg.rate_hz, delay_s=cfg.delay_s))
+    return out
 
 
 def sends_science(scenario: Scenario) -> bool:
-    """True when the rover carries the neutron spectrometer and sends its records down."""
-    return scenario.sensors.nss.enabled
+    """True when the rover carries a science instrument and sends its records down."""
+    return bool(instruments(scenario))
 
 
 def science_timing(scenario: Scenario) -> tuple[float, float]:
-    """(period, offset) s of the science packetizer: just after each NSS sample."""
-    nss = scenario.sensors.nss
-    period = 1.0 / nss.rate_hz
-    return period, (nss.delay_s % period) + 1e-6
+    """(period, offset) s of the science packetizer's updates."""
+    return TICK_S, 1e-6
 
 
 def sends_images(scenario: Scenario) -> bool:
@@ -64,7 +72,7 @@ def flight_inputs(scenario: Scenario) -> tuple:
     return (
         FLIGHT_INPUTS
         + (IMAGE_INPUTS if sends_images(scenario) else ())
-        + (SCIENCE_INPUTS if sends_science(scenario) else ())
+        + tuple(f"rover.{i.name}" for i in instruments(scenario))
     )
 
 
@@ -162,13 +170,11 @@ def MakeFlightDiagram(*, scenario: Scenario):
         builder.Connect(gimbal.gimbal_command_output, images.gimbal_input)
         builder.ExportOutput(images.images_output, "downlink.images")
     if sends_science(scenario):
-        nss = scenario.sensors.nss
         science = builder.AddNamedSystem(
-            "flight.science",
-            SciencePacketizer(instrument="nss", n_values=2, rate_hz=nss.rate_hz,
-                              delay_s=nss.delay_s),
+            "flight.science", SciencePacketizer(instruments=instruments(scenario))
         )
-        builder.ExportInput(science.values_input, "rover.nss")
+        for name, port in science.values_inputs.items():
+            builder.ExportInput(port, f"rover.{name}")
         builder.Connect(odometry.pose_estimate_output, science.pose_input)
         builder.ExportOutput(science.science_output, "downlink.science")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")

@@ -7,7 +7,8 @@ ports are named ``<subsystem>.<signal>``:
   ``rover.steer_angle_command`` (4, rad; explicit steer only), ``rover.gimbal_command``
   (2: pan, tilt, rad), ``rover.brake_command`` (1: >= 0.5 engages the wheel brakes);
 * sensor outputs -- :data:`SENSOR_PORTS`, ``rover.nss`` (2: epithermal and thermal
-  counts) when ``sensors.nss.enabled`` and, with cameras,
+  counts) when ``sensors.nss.enabled``, ``rover.nirvss`` (8: band depths and the LCS
+  temperature) when ``sensors.nirvss.enabled`` and, with cameras,
   ``camera.{left,right}.{raw,preview}`` and ``camera.frame_index``;
 * truth outputs -- :data:`TRUTH_PORTS` and, with cameras,
   ``truth.camera.{left,right}.{depth,label}``: ground truth for scoring and logging only.
@@ -53,7 +54,7 @@ from lunar_drake.systems.wheel_regolith_contact import WheelRegolithContact
 #: Sensor outputs (what flight software may read).
 SENSOR_PORTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders")
 #: Science instrument outputs, when the rover carries them (sensors too).
-INSTRUMENT_PORTS = ("rover.nss",)
+INSTRUMENT_PORTS = ("rover.nss", "rover.nirvss")
 
 #: Ground-truth outputs (scoring and logging only).
 TRUTH_PORTS = (
@@ -143,6 +144,8 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     _add_sensors(builder, scenario=scenario, plant=plant, rover=rover)
     if scenario.sensors.nss.enabled:
         _add_nss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
+    if scenario.sensors.nirvss.enabled:
+        _add_nirvss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
     _add_truth(builder, plant=plant, rover=rover, contact=contact)
     if scenario.comms.line_of_sight.enabled:
         los_cfg = scenario.comms.line_of_sight
@@ -307,6 +310,26 @@ def _add_nss(builder, *, scenario: Scenario, plant, rover: RoverModel, site) -> 
     )
     builder.Connect(plant.get_body_poses_output_port(), nss.body_poses_input)
     builder.ExportOutput(nss.measurement_output, "rover.nss")
+
+
+def _add_nirvss(builder, *, scenario: Scenario, plant, rover: RoverModel, site) -> None:
+    """NIRVSS and its LCS, reading the site's world model at the spot's true position:
+    ``rover.nirvss`` (8: band depths, then the LCS temperature in K)."""
+    from lunar_drake.science.world import surface_map
+    from lunar_drake.systems.nirvss import NIRVSSSensor
+
+    nirvss = builder.AddNamedSystem(
+        "rover.nirvss",
+        NIRVSSSensor(
+            body_index=rover.chassis.index(),
+            smap=surface_map(scenario=scenario, site=site),
+            seed=scenario.random_seed,
+            name="rover.nirvss",
+            config=scenario.sensors.nirvss,
+        ),
+    )
+    builder.Connect(plant.get_body_poses_output_port(), nirvss.body_poses_input)
+    builder.ExportOutput(nirvss.measurement_output, "rover.nirvss")
 
 
 def _add_truth(builder, *, plant, rover: RoverModel, contact) -> None:

@@ -223,36 +223,25 @@ def temperature(
     return equilibrium_temperature(q_direct_w_m2 + q_env, config=config)
 
 
-def direct_flux_at(
-    z: np.ndarray,
-    *,
-    resolution_m: float,
-    sun_azimuth_deg: float,
-    sun_elevation_deg: float,
-    distance_au: float = 1.0,
-    config: ThermalConfig | None = None,
-    horizon_mask: HorizonMask | None = None,
-    tile_px: int = 2048,
-    workers: int = 2,
-) -> np.ndarray:
+def direct_flux_at(z: np.ndarray, *, resolution_m: float, sun_azimuth_deg: float,
+                   sun_elevation_deg: float, distance_au: float = 1.0,
+                   config: ThermalConfig | None = None, horizon_mask: HorizonMask | None = None,
+                   tile_px: int = 2048, workers: int = 2,
+                   with_lit_fraction: bool = False):  # fmt: skip
     """Absorbed direct sunlight (W/m^2) at one Sun position (lit fraction from
-    :func:`lunar_drake.render.lightmap.lightmap`)."""
+    :func:`lunar_drake.render.lightmap.lightmap`); with ``with_lit_fraction``, also that
+    fraction."""
     from lunar_drake.render.lightmap import lightmap
 
     cfg = config or ThermalConfig()
     z = np.asarray(z, np.float64)
-    f = lightmap(
-        z,
-        sun_azimuth_deg=sun_azimuth_deg,
-        sun_elevation_deg=sun_elevation_deg,
-        resolution_m=resolution_m,
-        horizon_mask=horizon_mask,
-        tile_px=tile_px,
-        workers=workers,
-    )
+    f = lightmap(z, sun_azimuth_deg=sun_azimuth_deg, sun_elevation_deg=sun_elevation_deg,
+                 resolution_m=resolution_m, horizon_mask=horizon_mask, tile_px=tile_px,
+                 workers=workers)  # fmt: skip
     s = cfg.solar_constant_w_m2 / distance_au**2
     cosi = cos_incidence(surface_normals(z, resolution_m), sun_azimuth_deg, sun_elevation_deg)
-    return (1.0 - cfg.bond_albedo) * s * f * cosi
+    q = (1.0 - cfg.bond_albedo) * s * f * cosi
+    return (q, np.asarray(f)) if with_lit_fraction else q
 
 
 __all__ = [

@@ -8,6 +8,7 @@ file                        unit    from
 ==========================  ======  ==================================================
 ``psr.tif`` (uint8)         1/0     the DEM and the Sun's elevation envelope over a year
                                     (never any of the disk visible: 1)
+``lit_fraction.tif``        -       the Sun's disk visible at the epoch (lightmap)
 ``t_max_K.tif``             K       the highest direct flux over the year, terrain IR
 ``t_mean_K.tif``            K       the time-mean direct flux, terrain IR
 ``temperature_K.tif``       K       the Sun at the epoch (lightmap), terrain IR
@@ -54,6 +55,7 @@ class WorldModelError(LunarDrakeError, ValueError):
 #: Layer name -> (unit, physical range (lo, hi), colour map); ``minerals`` is 4 bands.
 LAYERS = {
     "psr": ("1 = permanent shadow", (0, 1), "gray_r"),
+    "lit_fraction": ("visible fraction of the Sun at the epoch", (0.0, 1.0), "gray"),
     "t_max_K": ("K", (0.0, 450.0), "inferno"),
     "t_mean_K": ("K", (0.0, 450.0), "inferno"),
     "temperature_K": ("K", (0.0, 450.0), "inferno"),
@@ -183,7 +185,7 @@ def compute_world(
         z, resolution_m=resolution_m, config=t, tile_px=cfg.tile_px, workers=cfg.workers
     )
     report("view factors", 0.75)
-    q_now = thermal.direct_flux_at(
+    q_now, lit_now = thermal.direct_flux_at(
         z,
         resolution_m=resolution_m,
         sun_azimuth_deg=sun_azimuth_deg,
@@ -193,8 +195,9 @@ def compute_world(
         horizon_mask=horizon_mask,
         tile_px=cfg.tile_px,
         workers=cfg.workers,
+        with_lit_fraction=True,
     )
-    out = {"psr": (~illum.ever_lit).astype(np.uint8)}
+    out = {"psr": (~illum.ever_lit).astype(np.uint8), "lit_fraction": lit_now}
     out["t_max_K"] = thermal.temperature(
         illum.q_max_w_m2, view=view, resolution_m=resolution_m, config=t
     )
@@ -431,12 +434,14 @@ def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
         ) from None
     cfg = dc.asdict(config)
     cfg.pop("tile_px"), cfg.pop("workers")
-    text = json.dumps({"site": site_text, "utc": utc, "config": cfg}, sort_keys=True)
+    text = json.dumps({"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS)},
+                      sort_keys=True)
     return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
 
-def cached_world(site_dir, *, utc: str, config: WorldConfig | None = None, names=None,
-                 progress: bool = False) -> dict:
+def cached_world(
+    site_dir, *, utc: str, config: WorldConfig | None = None, names=None, progress: bool = False
+) -> dict:
     """The layers ``names`` (default all) of a site's world model at ``utc``, built on
     first use into ``<cache>/worlds/<key>`` (see :func:`world_key`; ``cache`` as for
     sites, $LUNAR_DRAKE_CACHE) and read from there afterwards (range-checked)."""
@@ -448,8 +453,9 @@ def cached_world(site_dir, *, utc: str, config: WorldConfig | None = None, names
     if not (d / "world.json").is_file():
         d.parent.mkdir(parents=True, exist_ok=True)
         with staged_directory(d) as tmp:
-            build_world(site_dir=site_dir, out_dir=tmp, utc=utc, config=cfg, png=False,
-                        progress=progress)
+            build_world(
+                site_dir=site_dir, out_dir=tmp, utc=utc, config=cfg, png=False, progress=progress
+            )
     return {n: read_world_layer(d, n) for n in (names or LAYERS)}
 
 
@@ -464,10 +470,36 @@ def hydrogen_map(*, scenario, site, progress: bool = False):
             f"sensors.nss needs a synthesized site with a crater catalog; the site "
             f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
         )
-    layers = cached_world(directory, utc=scenario.site.epoch_utc, config=scenario.science,
-                          names=("dry_layer_m", "ice_wt_pct", "h_minerals_ppm"),
-                          progress=progress)
+    layers = cached_world(
+        directory,
+        utc=scenario.site.epoch_utc,
+        config=scenario.science,
+        names=("dry_layer_m", "ice_wt_pct", "h_minerals_ppm"),
+        progress=progress,
+    )
     return HydrogenMap.centred(**layers, resolution_m=site.heightfield.resolution_m)
+
+
+def surface_map(*, scenario, site, progress: bool = False):
+    """The :class:`~lunar_drake.science.nirvss.SurfaceMap` of a run's site at its epoch
+    (cached world model, :func:`cached_world`)."""
+    from lunar_drake.science.nirvss import LAYERS as NIRVSS_LAYERS
+    from lunar_drake.science.nirvss import SurfaceMap
+
+    directory = site.site.directory
+    if directory is None or not (Path(directory) / "craters.csv").is_file():
+        raise WorldModelError(
+            f"sensors.nirvss needs a synthesized site with a crater catalog; the site "
+            f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
+        )
+    layers = cached_world(
+        directory,
+        utc=scenario.site.epoch_utc,
+        config=scenario.science,
+        names=NIRVSS_LAYERS,
+        progress=progress,
+    )
+    return SurfaceMap.centred(layers, resolution_m=site.heightfield.resolution_m)
 
 
 def read_world_layer(out_dir, name: str) -> np.ndarray:
@@ -615,6 +647,7 @@ __all__ = [
     "overview",
     "read_craters",
     "read_world_layer",
+    "surface_map",
     "world_key",
     "write_world",
 ]

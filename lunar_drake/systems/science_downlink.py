@@ -3,6 +3,7 @@ downlink (:mod:`lunar_drake.comms.science`)."""
 
 from __future__ import annotations
 
+import dataclasses as dc
 import math
 
 from pydrake.common.value import AbstractValue
@@ -12,6 +13,20 @@ from lunar_drake.comms.messages import Ledger, Message
 from lunar_drake.comms.science import TOPIC, ScienceRecord
 from lunar_drake.sensors.sampling import delivered_index
 
+#: How often the packetizer looks for new instrument samples (s).
+TICK_S = 0.1
+
+
+@dc.dataclass(frozen=True)
+class Instrument:
+    """An instrument the packetizer serves: its ``name`` (the record's ``instrument``
+    and the input port ``rover.<name>``), ``n_values``, and its sampling (Hz, s)."""
+
+    name: str
+    n_values: int
+    rate_hz: float
+    delay_s: float
+
 
 class SciencePacketizer(LeafSystem):
     """Flight: one ``science`` message per new instrument sample.
@@ -20,54 +35,61 @@ class SciencePacketizer(LeafSystem):
 
         name: SciencePacketizer
         input_ports:
-        - counts
+        - rover.<instrument> (one per instrument)
         - pose_estimate
         output_ports:
         - science
 
-    Every sample period, just after a sample is delivered (``offset_s``), the newest
-    delivered sample (index from the instrument's ``rate_hz`` and ``delay_s``) goes into
-    the outbox ``science`` (a tuple with the newest message; seq = the sample index) as
-    a :class:`~lunar_drake.comms.science.ScienceRecord` with the on-board
-    ``pose_estimate`` (6,). State (abstract): (last index sent, outbox).
+    Every :data:`TICK_S` s (from 1 us) each instrument's newest delivered sample (index
+    from its ``rate_hz`` and ``delay_s``), if not sent yet, goes into the outbox
+    ``science`` (a tuple of the messages of this tick; seq counts every record sent) as a
+    :class:`~lunar_drake.comms.science.ScienceRecord` with the on-board
+    ``pose_estimate`` (6,). State (abstract): (last index sent per instrument, records
+    sent, outbox).
     """
 
-    def __init__(self, *, instrument: str, n_values: int, rate_hz: float, delay_s: float):
+    def __init__(self, *, instruments):
         super().__init__()
-        self._instrument = instrument
-        self._rate, self._delay = float(rate_hz), float(delay_s)
-        period = 1.0 / self._rate
-        self.values_input = self.DeclareVectorInputPort("counts", n_values)
+        self._instruments = tuple(instruments)
+        self.values_inputs = {
+            i.name: self.DeclareVectorInputPort(f"rover.{i.name}", i.n_values)
+            for i in self._instruments
+        }
         self.pose_input = self.DeclareVectorInputPort("pose_estimate", 6)
-        self._state = self.DeclareAbstractState(AbstractValue.Make((-1, ())))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, (self._delay % period) + 1e-6,
-                                                    self._update)  # fmt: skip
+        start = ((-1,) * len(self._instruments), 0, ())
+        self._state = self.DeclareAbstractState(AbstractValue.Make(start))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(TICK_S, 1e-6, self._update)
         self.science_output = self.DeclareAbstractOutputPort(
             TOPIC,
             lambda: AbstractValue.Make(()),
-            lambda c, o: o.set_value(c.get_abstract_state(self._state).get_value()[1]),
+            lambda c, o: o.set_value(c.get_abstract_state(self._state).get_value()[2]),
             prerequisites_of_calc={self.all_state_ticket()},
         )
 
     def _update(self, context, state):
-        last, previous = context.get_abstract_state(self._state).get_value()
-        k = delivered_index(context.get_time(), rate_hz=self._rate, delay_s=self._delay)
-        if k < 0 or k == last:
-            if previous:
-                state.get_mutable_abstract_state(self._state).set_value((last, ()))
-            return
-        pose = tuple(float(v) for v in self.pose_input.Eval(context))
-        record = ScienceRecord(
-            instrument=self._instrument,
-            index=k,
-            t_sample_s=k / self._rate,
-            values=tuple(float(v) for v in self.values_input.Eval(context)),
-            integration_s=1.0 / self._rate,
-            pose_estimate=pose if all(math.isfinite(v) for v in pose) else (math.nan,) * 6,
-        )
-        msg = Message(topic=TOPIC, seq=k, t_sent_s=context.get_time(), payload=record,
-                      size_bytes=record.size_bytes())  # fmt: skip
-        state.get_mutable_abstract_state(self._state).set_value((k, (msg,)))
+        last, sent, previous = context.get_abstract_state(self._state).get_value()
+        t = context.get_time()
+        new_last, out = list(last), []
+        for n, inst in enumerate(self._instruments):
+            k = delivered_index(t, rate_hz=inst.rate_hz, delay_s=inst.delay_s)
+            if k < 0 or k == last[n]:
+                continue
+            pose = tuple(float(v) for v in self.pose_input.Eval(context))
+            record = ScienceRecord(
+                instrument=inst.name,
+                index=k,
+                t_sample_s=k / inst.rate_hz,
+                values=tuple(float(v) for v in self.values_inputs[inst.name].Eval(context)),
+                integration_s=1.0 / inst.rate_hz,
+                pose_estimate=pose if all(math.isfinite(v) for v in pose) else (math.nan,) * 6,
+            )
+            out.append(Message(topic=TOPIC, seq=sent, t_sent_s=t, payload=record,
+                               size_bytes=record.size_bytes()))  # fmt: skip
+            new_last[n], sent = k, sent + 1
+        if out or previous:
+            state.get_mutable_abstract_state(self._state).set_value(
+                (tuple(new_last), sent, tuple(out))
+            )
 
 
 class ScienceReceiver(LeafSystem):
