@@ -194,8 +194,10 @@ def _cmd_run(args) -> int:
     sci = summary.get("science") or {}
     if "nirvss_records" in sci:
         rmse = sci.get("lcs_rmse_K")
-        print(f"Science: the ground received {_plural(sci['nirvss_records'], 'NIRVSS record')}"
-              + (f"; LCS {rmse:.2f} K RMS from the truth" if rmse is not None else ""))  # fmt: skip
+        lcs = f"; LCS {rmse:.2f} K RMS from the truth" if rmse is not None else ""
+        drill = f"; {sci['drill_samples']} drill samples" if "drill_samples" in sci else ""
+        print(f"Science: the ground received "
+              f"{_plural(sci['nirvss_records'], 'NIRVSS record')}{lcs}{drill}")
     if "nss_records" in sci:
         r = sci.get("nss_truth_r")
         score = f"; against truth r = {r:.2f} over {sci['nss_cells']} cells of 2 m" if r else ""
@@ -204,7 +206,7 @@ def _cmd_run(args) -> int:
                  f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")
               + score)  # fmt: skip
     files = outputs.run_files()
-    for name in ("nss.csv", "nss_map.png", "nirvss.csv", "lcs.csv"):
+    for name in ("nss.csv", "nss_map.png", "nirvss.csv", "lcs.csv", "drill.csv"):
         if (out / name).exists():
             files.append(name)
     if per.get("keyframes"):

@@ -333,6 +333,8 @@ def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     out = {}
     if scenario.sensors.nirvss.enabled:
         out.update(_lcs(scenario=scenario, site=site, logs=logs))
+    if scenario.sensors.drill.enabled:
+        out["drill_samples"] = sum(1 for _t, r in logs.science_received if r.instrument == "drill")
     if not scenario.sensors.nss.enabled:
         return out
     cfg = scenario.sensors.nss

@@ -10,7 +10,8 @@ the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
 mapping keyframes; with ground perception), ``nss.csv`` and ``nss_map.png`` (the
 neutron spectrometer's records as the ground received them and its hydrogen map; with
 ``sensors.nss``), ``nirvss.csv`` and ``lcs.csv`` (NIRVSS band depths and the LCS
-temperature as received; with ``sensors.nirvss``), ``ground_map.png`` (the ground's final
+temperature as received; with ``sensors.nirvss``), ``drill.csv`` (drill samples read
+by NIRVSS; with ``sensors.drill``), ``ground_map.png`` (the ground's final
 costmap round the traverse: :mod:`lunar_drake.ground_map`), ``calibration.yaml`` (the
 stereo rig, OpenCV style; with the cameras on), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
@@ -67,6 +68,7 @@ RUN_DIR_NAMES = frozenset(
         "nss_map.png",
         "nirvss.csv",
         "lcs.csv",
+        "drill.csv",
         "ground_map.png",
         "calibration.yaml",
         "frames",
@@ -113,12 +115,24 @@ def _nirvss_columns() -> list[str]:
 
 
 LCS_COLUMNS = ["t_received_s", "t_sample_s", "index", "temperature_K", "x_est_m", "y_est_m"]
+#: ``drill.csv``: reception and sample times (s), the sample number, its depth (m), its
+#: NIRVSS ice band depth (-), the ground's ice from it (wt%), the on-board estimate (m).
+DRILL_COLUMNS = ["t_received_s", "t_sample_s", "sample", "depth_m", "bd_ice", "ice_est_wt_pct",
+                 "x_est_m", "y_est_m"]  # fmt: skip
 
 
 def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> list[Path]:
     """``nss.csv`` and ``nss_map.png``, ``nirvss.csv`` and ``lcs.csv`` from the records
     the ground received (each only when its instrument is carried)."""
     paths = []
+    if scenario.sensors.drill.enabled:
+        k_ice = scenario.sensors.nirvss.ice_per_wt_pct
+        rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(int(r.values[0])), _fmt(r.values[1]),
+                 _fmt(r.values[2]), _fmt(r.values[2] / k_ice if k_ice > 0 else math.nan),
+                 _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1])]
+                for t, r in logs.science_received if r.instrument == "drill")  # fmt: skip
+        write_csv(out / "drill.csv", DRILL_COLUMNS, rows)
+        paths.append(out / "drill.csv")
     if scenario.sensors.nirvss.enabled:
         nir = [(t, r) for t, r in logs.science_received if r.instrument == "nirvss"]
         rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(r.index), *(_fmt(v) for v in r.values[:-1]),

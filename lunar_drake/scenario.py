@@ -41,6 +41,7 @@ from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 from lunar_drake.perception.ground_pipeline import PerceptionConfig
 from lunar_drake.render.camera import CameraConfig
 from lunar_drake.science.config import WorldConfig
+from lunar_drake.science.drill import DrillConfig, check_drill_request
 from lunar_drake.science.nirvss import NIRVSSConfig
 from lunar_drake.science.nss import NSSConfig
 from lunar_drake.sensors.imu import ImuConfig
@@ -165,6 +166,7 @@ class SensorsConfig:
         wheel_encoders: drive-joint encoders. camera: the mast stereo pair.
         nss: the neutron spectrometer (science; reads the world model, ``science``).
         nirvss: the near-infrared volatiles spectrometer and its LCS (same).
+        drill: the drill (its samples are read by NIRVSS; ground action ``drill``).
     """
 
     imu: ImuConfig = dc.field(default_factory=ImuConfig)
@@ -173,6 +175,7 @@ class SensorsConfig:
     camera: CameraConfig = dc.field(default_factory=CameraConfig)
     nss: NSSConfig = dc.field(default_factory=NSSConfig)
     nirvss: NIRVSSConfig = dc.field(default_factory=NIRVSSConfig)
+    drill: DrillConfig = dc.field(default_factory=DrillConfig)
 
 
 @dc.dataclass
@@ -256,7 +259,7 @@ class Goal:
 
 
 #: Operator actions a scenario may schedule (``ground.actions``).
-ACTIONS = ("goal", "stop", "resume", "drive_arc", "point_mast")
+ACTIONS = ("goal", "stop", "resume", "drive_arc", "point_mast", "drill")
 
 
 @dc.dataclass
@@ -266,10 +269,11 @@ class OperatorAction:
 
     Attributes:
         t_s: when the ground sends it (s).
-        action: goal, stop, resume, drive_arc or point_mast.
+        action: goal, stop, resume, drive_arc, point_mast or drill.
         x_m, y_m: the goal (site frame, m).
         speed_mps, curvature_per_m, distance_m: the arc (m/s, 1/m positive left, m).
         pan_deg, tilt_deg: the mast pointing (deg); auto: back to automatic pointing.
+        depth_m, step_m: the drill's depth and sample spacing (m; at most 1 m).
     """
 
     t_s: float = 0.0
@@ -282,6 +286,8 @@ class OperatorAction:
     pan_deg: float = 0.0
     tilt_deg: float = 0.0
     auto: bool = False
+    depth_m: float = 0.5
+    step_m: float = 0.1
 
 
 @dc.dataclass
@@ -493,6 +499,10 @@ def validate_scenario(s: Scenario) -> None:
     _section("sensors.camera", s.sensors.camera.validate)
     _section("sensors.nss", s.sensors.nss.validate)
     _section("sensors.nirvss", s.sensors.nirvss.validate)
+    _section("sensors.drill", s.sensors.drill.validate)
+    if s.sensors.drill.enabled and not s.sensors.nirvss.enabled:
+        raise ConfigError("sensors.drill.enabled needs sensors.nirvss.enabled (NIRVSS reads "
+                          "the drill's samples)")  # fmt: skip
     _section("science", s.science.validate)
     li = s.lighting
     check_range(
@@ -520,6 +530,13 @@ def validate_scenario(s: Scenario) -> None:
         check_range(f"ground.goals[{k}].x_m", g.x_m, -1e6, 1e6, unit=" m")
         check_range(f"ground.goals[{k}].y_m", g.y_m, -1e6, 1e6, unit=" m")
     _validate_ground(s.ground)
+    for k, a in enumerate(s.ground.actions):
+        if a.action == "drill":
+            if not s.sensors.drill.enabled:
+                raise ConfigError(f"ground.actions[{k}].action = 'drill' needs "
+                                  "sensors.drill.enabled")  # fmt: skip
+            check_drill_request(a.depth_m, a.step_m, max_depth_m=s.sensors.drill.max_depth_m,
+                                what=f"ground.actions[{k}].")  # fmt: skip
     timeout = s.flight.safety.uplink_timeout_s
     if timeout > 0 and s.ground.heartbeat_s > 0.5 * timeout:
         raise OutOfRangeError(

@@ -88,3 +88,62 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
     with open(tmp_path / "lcs.csv") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == len(nir) and 20.0 < float(rows[-1]["temperature_K"]) < 450.0
+
+
+def test_drill_requests_beyond_a_metre_are_refused(tmp_path, capsys):
+    from lunar_drake.cli import main
+    from lunar_drake.errors import ConfigError, OutOfRangeError
+    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.science.drill import check_drill_request
+
+    assert check_drill_request(0.5, 0.1) == 5
+    with pytest.raises(OutOfRangeError, match=r"depth_m = 1\.2 .*the drill reaches 1 m"):
+        check_drill_request(1.2, 0.1)
+    with pytest.raises(OutOfRangeError, match=r"step_m = 0\.6"):
+        check_drill_request(0.5, 0.6)
+    text = ("{sensors: {nirvss: {enabled: true}, drill: {enabled: true}}, ground: {actions: "
+            "[{t_s: 1.0, action: drill, depth_m: 1.5}]}}")  # fmt: skip
+    with pytest.raises(OutOfRangeError, match=r"ground.actions\[0\].depth_m = 1.5"):
+        load_scenario(scenario_name="small", scenario_text=text)
+    with pytest.raises(ConfigError, match=r"needs sensors\.nirvss\.enabled"):
+        load_scenario(scenario_name="small", scenario_text="{sensors: {drill: {enabled: true}}}")
+    code = main(["run", "--scenario", "small", "--scenario-text", text, "--no-meshcat",
+                 "--out", str(tmp_path / "r")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "1.5" in err
+
+
+def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
+    from lunar_drake import metrics, outputs
+    from lunar_drake.science.drill import ice_at_depth
+    from lunar_drake.science.nirvss import spot_means
+    from lunar_drake.science.world import surface_map
+    from lunar_drake.simulation import simulate
+
+    scenario, site = small_site
+    s = apply_overrides(scenario, (
+        "{simulation_duration: 15.0, sensors: {nirvss: {enabled: true}, drill: {enabled: true,"
+        " seconds_per_step: 2.0}}, ground: {route: [{duration_s: 1.0}], actions: [{t_s: 2.5,"
+        " action: drill, depth_m: 0.5, step_m: 0.1}]}}"))  # fmt: skip
+    logs = simulate(scenario=s, site=site)
+    recs = [r for _t, r in logs.science_received if r.instrument == "drill"]
+    assert [round(r.values[1], 6) for r in recs] == [0.1, 0.2, 0.3, 0.4, 0.5]
+    assert [int(r.values[0]) for r in recs] == [1, 2, 3, 4, 5]
+    # Truth at the hole: the drill 0.6 m ahead of the chassis when it started.
+    pose = logs.vectors["truth.pose"]
+    k = int(np.searchsorted(pose.times, 3.0))
+    x, y, yaw = pose.data[k, 0], pose.data[k, 1], pose.data[k, 5]
+    spot = spot_means(surface_map(scenario=s, site=site), x + 0.6 * np.cos(yaw),
+                      y + 0.6 * np.sin(yaw), radius_m=0.05)  # fmt: skip
+    cfg = s.sensors.nirvss
+    for r in recs:
+        truth = ice_at_depth(spot["dry_layer_m"], spot["ice_wt_pct"], r.values[1])
+        assert r.values[2] / cfg.ice_per_wt_pct == pytest.approx(
+            truth, abs=4 * cfg.sigma_lamp / cfg.ice_per_wt_pct
+        )
+    summary = metrics.summarize(scenario=s, site=site, logs=logs)
+    assert summary["science"]["drill_samples"] == 5
+    outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall)
+    with open(tmp_path / "drill.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == outputs.DRILL_COLUMNS and [r["depth_m"] for r in rows][-1] == "0.5"

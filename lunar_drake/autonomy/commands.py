@@ -104,6 +104,20 @@ class MastCommand:
 
 
 @dc.dataclass(frozen=True)
+class DrillCommand:
+    """Drill at the rover's stop: samples every ``step_m`` down to ``depth_m`` (m), each
+    brought up and read by NIRVSS (the executor ignores it; the flight's drill
+    controller passes it to the drill, :mod:`lunar_drake.science.drill`)."""
+
+    depth_m: float = 0.5
+    step_m: float = 0.1
+
+    def size_bytes(self) -> int:
+        """Encoded size: a 4-byte header and two float64."""
+        return 4 + 2 * 8
+
+
+@dc.dataclass(frozen=True)
 class Heartbeat:
     """The ground's keep-alive: proves the uplink is up (no action)."""
 

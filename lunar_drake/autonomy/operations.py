@@ -41,6 +41,7 @@ import numpy as np
 from lunar_drake.autonomy.commands import (
     MODES,
     SAFE_REASONS,
+    DrillCommand,
     DriveCommand,
     GotoCommand,
     Heartbeat,
@@ -54,7 +55,7 @@ from lunar_drake.errors import LunarDrakeError
 
 TOPIC = "commands"
 #: Operator request kinds.
-REQUESTS = ("goal", "stop", "resume", "drive_arc", "point_mast", "drive")
+REQUESTS = ("goal", "stop", "resume", "drive_arc", "point_mast", "drive", "drill")
 #: What becomes of a goal (on the ground's own judgement, from telemetry).
 GOAL_STATUS = ("pending", "active", "reached", "failed")
 
@@ -305,6 +306,10 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             note("drive_arc", f"{v:g} m/s, {k:g} 1/m, {dist:g} m")
         elif r.kind == "drive":
             send(r.args[0])
+        elif r.kind == "drill":
+            depth, step = (float(a) for a in r.args)
+            send(DrillCommand(depth_m=depth, step_m=step))
+            note("drill", f"to {depth:g} m in steps of {step:g} m")
         elif r.kind == "point_mast":
             cmd = MastCommand(auto=True) if not r.args else MastCommand(*map(float, r.args))
             send(cmd)

@@ -8,7 +8,8 @@ Wiring only. Ports (``<subsystem>.<signal>``):
   spectrometer or NIRVSS, ``rover.nss`` / ``rover.nirvss``;
 * outputs -- actuator commands ``rover.wheel_speed_command``,
   ``rover.steer_angle_command`` (explicit steer), ``rover.gimbal_command``,
-  ``rover.brake_command``; the downlink outboxes ``downlink.telemetry`` (and
+  ``rover.brake_command`` (and ``rover.drill_command`` with the drill); the downlink
+  outboxes ``downlink.telemetry`` (and
   ``downlink.images``: compressed stereo frames; ``downlink.science``: instrument
   records); and the on-board
   records ``flight.twist_command``, ``flight.brake_command``, ``flight.pose_estimate``,
@@ -25,6 +26,7 @@ from pydrake.systems.framework import DiagramBuilder
 from lunar_drake.autonomy.follower import FollowerParams
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.command_executor import CommandExecutor
+from lunar_drake.systems.drill import DrillController
 from lunar_drake.systems.gimbal_pointing import GimbalPointing
 from lunar_drake.systems.image_downlink import ImagePacketizer
 from lunar_drake.systems.rover_kinematics import RoverKinematics
@@ -38,16 +40,18 @@ FLIGHT_INPUTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "upl
 #: Camera sensor inputs, when it sends frames down (:func:`sends_images`).
 IMAGE_INPUTS = ("camera.frame_index", "camera.left.raw", "camera.right.raw")
 #: Values each science instrument reports (``rover.<name>`` sensor ports).
-INSTRUMENT_VALUES = {"nss": 2, "nirvss": 8}
+INSTRUMENT_VALUES = {"nss": 2, "nirvss": 8, "drill": 4}
 
 
 def instruments(scenario: Scenario) -> list[Instrument]:
-    """The science instruments the rover carries (``sensors.nss``, ``sensors.nirvss``)."""
+    """The science instruments the rover carries (``sensors.nss``, ``sensors.nirvss``,
+    ``sensors.drill``: its records go when its sample count grows, ``rate_hz`` 0)."""
     out = []
     for name, n in INSTRUMENT_VALUES.items():
         cfg = getattr(scenario.sensors, name)
         if cfg.enabled:
-            out.append(Instrument(name=name, n_values=n, rate_hz=cfg.rate_hz, delay_s=cfg.delay_s))
+            rate, delay = getattr(cfg, "rate_hz", 0.0), getattr(cfg, "delay_s", 0.0)
+            out.append(Instrument(name=name, n_values=n, rate_hz=rate, delay_s=delay))
     return out
 
 
@@ -177,6 +181,11 @@ def MakeFlightDiagram(*, scenario: Scenario):
             builder.ExportInput(port, f"rover.{name}")
         builder.Connect(odometry.pose_estimate_output, science.pose_input)
         builder.ExportOutput(science.science_output, "downlink.science")
+    if scenario.sensors.drill.enabled:
+        drill = builder.AddNamedSystem("flight.drill", DrillController(rate_hz=f.rate_hz))
+        builder.ConnectInput("uplink.commands", drill.commands_input)
+        builder.Connect(executor.status_output, drill.status_input)
+        builder.ExportOutput(drill.drill_command_output, "rover.drill_command")
     builder.ExportOutput(executor.twist_output, "flight.twist_command")
     builder.ExportOutput(odometry.pose_estimate_output, "flight.pose_estimate")
     builder.ExportOutput(odometry.pose_covariance_output, "flight.pose_covariance")

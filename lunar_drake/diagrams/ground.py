@@ -138,6 +138,8 @@ def scheduled_requests(scenario: Scenario) -> list:
         elif a.action == "point_mast":
             args = () if a.auto else (math.radians(a.pan_deg), math.radians(a.tilt_deg))
             r = Request("point_mast", args)
+        elif a.action == "drill":
+            r = Request("drill", (a.depth_m, a.step_m))
         else:
             r = Request(a.action)
         out.append((a.t_s, r))

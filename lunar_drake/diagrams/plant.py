@@ -54,7 +54,7 @@ from lunar_drake.systems.wheel_regolith_contact import WheelRegolithContact
 #: Sensor outputs (what flight software may read).
 SENSOR_PORTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders")
 #: Science instrument outputs, when the rover carries them (sensors too).
-INSTRUMENT_PORTS = ("rover.nss", "rover.nirvss")
+INSTRUMENT_PORTS = ("rover.nss", "rover.nirvss", "rover.drill")
 
 #: Ground-truth outputs (scoring and logging only).
 TRUTH_PORTS = (
@@ -146,6 +146,8 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
         _add_nss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
     if scenario.sensors.nirvss.enabled:
         _add_nirvss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
+    if scenario.sensors.drill.enabled:
+        _add_drill(builder, scenario=scenario, plant=plant, rover=rover, site=site)
     _add_truth(builder, plant=plant, rover=rover, contact=contact)
     if scenario.comms.line_of_sight.enabled:
         los_cfg = scenario.comms.line_of_sight
@@ -330,6 +332,27 @@ def _add_nirvss(builder, *, scenario: Scenario, plant, rover: RoverModel, site) 
     )
     builder.Connect(plant.get_body_poses_output_port(), nirvss.body_poses_input)
     builder.ExportOutput(nirvss.measurement_output, "rover.nirvss")
+
+
+def _add_drill(builder, *, scenario: Scenario, plant, rover: RoverModel, site) -> None:
+    """The drill: input ``rover.drill_command`` (3: seq, depth, step), output
+    ``rover.drill`` (4: samples so far, depth m, NIRVSS ice band depth, time s)."""
+    from lunar_drake.science.world import surface_map
+    from lunar_drake.systems.drill import Drill
+
+    drill = builder.AddNamedSystem(
+        "rover.drill",
+        Drill(
+            body_index=rover.chassis.index(),
+            smap=surface_map(scenario=scenario, site=site),
+            seed=scenario.random_seed,
+            config=scenario.sensors.drill,
+            nirvss=scenario.sensors.nirvss,
+        ),
+    )
+    builder.Connect(plant.get_body_poses_output_port(), drill.body_poses_input)
+    builder.ExportInput(drill.command_input, "rover.drill_command")
+    builder.ExportOutput(drill.samples_output, "rover.drill")
 
 
 def _add_truth(builder, *, plant, rover: RoverModel, contact) -> None:

@@ -151,6 +151,14 @@ class GroundOperator(LeafSystem):
             raise OutOfRangeError(f"pan_rad, tilt_rad = {pan_rad!r}, {tilt_rad!r} must be finite")
         self._request(context, Request("point_mast", (pan, tilt)))
 
+    def drill(self, context, *, depth_m: float, step_m: float = 0.1) -> None:
+        """Drills at the rover's stop: samples every ``step_m`` down to ``depth_m`` (m, at
+        most 1 m), read by NIRVSS (``drill.csv``). Send it while the rover waits."""
+        from lunar_drake.science.drill import check_drill_request
+
+        check_drill_request(float(depth_m), float(step_m))
+        self._request(context, Request("drill", (float(depth_m), float(step_m))))
+
     # ------------------------------------------------------------------------ internals
 
     def _own(self, context):

@@ -20,7 +20,9 @@ TICK_S = 0.1
 @dc.dataclass(frozen=True)
 class Instrument:
     """An instrument the packetizer serves: its ``name`` (the record's ``instrument``
-    and the input port ``rover.<name>``), ``n_values``, and its sampling (Hz, s)."""
+    and the input port ``rover.<name>``), ``n_values``, and its sampling (Hz, s);
+    ``rate_hz`` 0: an event instrument whose values start with its sample count and end
+    with the sample's time (the drill)."""
 
     name: str
     n_values: int
@@ -71,16 +73,24 @@ class SciencePacketizer(LeafSystem):
         t = context.get_time()
         new_last, out = list(last), []
         for n, inst in enumerate(self._instruments):
-            k = delivered_index(t, rate_hz=inst.rate_hz, delay_s=inst.delay_s)
+            values = None
+            if inst.rate_hz > 0:
+                k = delivered_index(t, rate_hz=inst.rate_hz, delay_s=inst.delay_s)
+                t_sample, dt = k / inst.rate_hz, 1.0 / inst.rate_hz
+            else:  # event instrument: values = (count, ..., time of the sample)
+                values = tuple(float(v) for v in self.values_inputs[inst.name].Eval(context))
+                k, t_sample, dt = int(values[0]) - 1, values[-1], 0.0
             if k < 0 or k == last[n]:
                 continue
+            if values is None:
+                values = tuple(float(v) for v in self.values_inputs[inst.name].Eval(context))
             pose = tuple(float(v) for v in self.pose_input.Eval(context))
             record = ScienceRecord(
                 instrument=inst.name,
                 index=k,
-                t_sample_s=k / inst.rate_hz,
-                values=tuple(float(v) for v in self.values_inputs[inst.name].Eval(context)),
-                integration_s=1.0 / inst.rate_hz,
+                t_sample_s=t_sample,
+                values=values,
+                integration_s=dt,
                 pose_estimate=pose if all(math.isfinite(v) for v in pose) else (math.nan,) * 6,
             )
             out.append(Message(topic=TOPIC, seq=sent, t_sent_s=t, payload=record,
