@@ -314,10 +314,13 @@ def _lcs(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
     smap = surface_map(scenario=scenario, site=site)
     pose = logs.vectors["truth.pose"]
     err = []
+    from lunar_drake.rotations import rotation_matrix_from_rpy
+
     for r in recs:
-        x, y, yaw = (np.interp(r.t_sample_s, pose.times, pose.data[:, k]) for k in (0, 1, 5))
-        spot = spot_means(smap, x + cfg.x_m * math.cos(yaw), y + cfg.x_m * math.sin(yaw),
-                          radius_m=cfg.spot_radius_m)  # fmt: skip
+        k = min(int(np.searchsorted(pose.times, r.t_sample_s - 1e-9)), len(pose.times) - 1)
+        row = pose.data[k]  # the logged true pose at the sample time
+        p = row[:3] + rotation_matrix_from_rpy(row[3:6]) @ np.array([cfg.x_m, 0.0, 0.0])
+        spot = spot_means(smap, float(p[0]), float(p[1]), radius_m=cfg.spot_radius_m)
         err.append(r.values[-1] - spot["temperature_K"])
     out["lcs_rmse_K"] = _r(float(np.sqrt(np.mean(np.square(err)))))
     return out
