@@ -111,8 +111,9 @@ class SurfaceMap:
 
 
 def spot_means(smap: SurfaceMap, x_m: float, y_m: float, *, radius_m: float) -> dict:
-    """Mean of each layer over the cells whose centres lie within ``radius_m`` of (x, y)
-    (the nearest cell if none does)."""
+    """Area-weighted mean of each layer over a disk of ``radius_m`` about (x, y): each
+    cell weighs the share of it inside the disk, approximated by a ramp one cell wide
+    across the rim, so that the mean moves smoothly with the spot."""
     res = smap.resolution_m
     t = smap.layers["temperature_K"]
     rows, cols = t.shape
@@ -122,20 +123,22 @@ def spot_means(smap: SurfaceMap, x_m: float, y_m: float, *, radius_m: float) -> 
         raise OutOfBoundsError(
             f"NIRVSS spot at ({x_m:.2f}, {y_m:.2f}) m lies outside the world model's grid"
         )
-    k = math.ceil(radius_m / res)
+    k = math.ceil(radius_m / res) + 1
     r0, r1 = max(0, math.floor(r) - k), min(rows, math.ceil(r) + k + 1)
     c0, c1 = max(0, math.floor(c) - k), min(cols, math.ceil(c) + k + 1)
     rr, cc = np.mgrid[r0:r1, c0:c1]
-    inside = np.hypot((rr - r) * res, (cc - c) * res) <= radius_m
-    if not inside.any():
-        inside = (rr == round(r)) & (cc == round(c))
+    d = np.hypot((rr - r) * res, (cc - c) * res)
+    w = np.clip((radius_m - d) / res + 0.5, 0.0, 1.0)
+    if w.sum() <= 0.0:
+        w = ((rr == round(r)) & (cc == round(c))).astype(np.float64)
+    w = w / w.sum()
     out = {}
     for name, a in smap.layers.items():
         a = np.asarray(a)
         if a.ndim == 3:
-            out[name] = a[:, r0:r1, c0:c1][:, inside].astype(np.float64).mean(axis=1)
+            out[name] = (a[:, r0:r1, c0:c1].astype(np.float64) * w).sum(axis=(1, 2))
         else:
-            out[name] = float(a[r0:r1, c0:c1][inside].astype(np.float64).mean())
+            out[name] = float((a[r0:r1, c0:c1].astype(np.float64) * w).sum())
     return out
 
 
