@@ -24,7 +24,7 @@ def _smap(n=60, res=0.05, lit=1.0):
 
 
 def test_spot_means_are_smooth_disk_averages():
-    smap, x, y = _smap()
+    smap, _x, _y = _smap()
     # A symmetric average of a linear field is its value at the centre.
     spot = nirvss.spot_means(smap, 0.3, 0.2, radius_m=0.15)
     assert spot["temperature_K"] == pytest.approx(100.0 + 10.0 * 0.3, abs=0.02)

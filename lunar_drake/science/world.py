@@ -434,8 +434,9 @@ def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
         ) from None
     cfg = dc.asdict(config)
     cfg.pop("tile_px"), cfg.pop("workers")
-    text = json.dumps({"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS)},
-                      sort_keys=True)
+    text = json.dumps(
+        {"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS)}, sort_keys=True
+    )
     return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
 
