@@ -53,7 +53,7 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - t0
     summary = metrics.summarize(scenario=s, site=site, logs=logs)
     with staged_directory(Path(args.runs)) as tmp:
-        outputs.write_run(tmp, scenario=s, logs=logs, summary=summary, timing=logs.wall)
+        outputs.write_run(tmp, scenario=s, logs=logs, summary=summary, timing=logs.wall, site=site)
     sci = summary["science"]
     xs = [g.x_m for g in s.ground.goals] + [s.rover.spawn_x_m]
     ys = [g.y_m for g in s.ground.goals] + [s.rover.spawn_y_m]

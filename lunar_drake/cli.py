@@ -132,6 +132,7 @@ def _cmd_run(args) -> int:
             summary=summary,
             timing=timing,
             meshcat_html=meshcat.StaticHtml() if meshcat is not None else None,
+            site=site,
         )
     s = summary["site"]
     print(
@@ -206,7 +207,8 @@ def _cmd_run(args) -> int:
                  f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")
               + score)  # fmt: skip
     files = outputs.run_files()
-    for name in ("nss.csv", "nss_map.png", "nirvss.csv", "lcs.csv", "drill.csv"):
+    for name in ("nss.csv", "nss_map.png", "nss_map.tif", "nirvss.csv", "nirvss_map.png",
+                 "nirvss_map.tif", "lcs.csv", "lcs_map.png", "lcs_map.tif", "drill.csv"):
         if (out / name).exists():
             files.append(name)
     if per.get("keyframes"):

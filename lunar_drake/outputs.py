@@ -66,8 +66,13 @@ RUN_DIR_NAMES = frozenset(
         "keyframes.csv",
         "nss.csv",
         "nss_map.png",
+        "nss_map.tif",
         "nirvss.csv",
+        "nirvss_map.png",
+        "nirvss_map.tif",
         "lcs.csv",
+        "lcs_map.png",
+        "lcs_map.tif",
         "drill.csv",
         "ground_map.png",
         "calibration.yaml",
@@ -121,9 +126,13 @@ DRILL_COLUMNS = ["t_received_s", "t_sample_s", "sample", "depth_m", "bd_ice", "i
                  "x_est_m", "y_est_m"]  # fmt: skip
 
 
-def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> list[Path]:
+def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs,
+                  site=None) -> list[Path]:  # fmt: skip
     """``nss.csv`` and ``nss_map.png``, ``nirvss.csv`` and ``lcs.csv`` from the records
-    the ground received (each only when its instrument is carried)."""
+    the ground received (each only when its instrument is carried), and the maps of
+    :func:`lunar_drake.science.products.science_maps` (GeoTIFFs need ``site``)."""
+    from lunar_drake.science.products import science_maps
+
     paths = []
     if scenario.sensors.drill.enabled:
         k_ice = scenario.sensors.nirvss.ice_per_wt_pct
@@ -143,10 +152,13 @@ def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> lis
                  _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1])] for t, r in nir)  # fmt: skip
         write_csv(out / "lcs.csv", LCS_COLUMNS, rows)
         paths += [out / "nirvss.csv", out / "lcs.csv"]
-    if not scenario.sensors.nss.enabled:
-        return paths
+    if scenario.sensors.nss.enabled:
+        paths += _write_nss(out, scenario=scenario, logs=logs)
+    return paths + science_maps(out, scenario=scenario, logs=logs, site=site)
+
+
+def _write_nss(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> list[Path]:
     from lunar_drake.science.nss import weh_from_epithermal
-    from lunar_drake.science.products import nss_map_png
 
     cfg = scenario.sensors.nss
     rows = []
@@ -160,11 +172,7 @@ def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs) -> lis
                      f"{th:.0f}", _fmt(r.integration_s), _fmt(p[0]), _fmt(p[1]), _fmt(p[5]),
                      _fmt(weh)])  # fmt: skip
     write_csv(out / "nss.csv", NSS_COLUMNS, rows)
-    paths.append(out / "nss.csv")
-    if rows:
-        nss_map_png(out / "nss_map.png", logs=logs, scenario=scenario)
-        paths.append(out / "nss_map.png")
-    return paths
+    return [out / "nss.csv"]
 
 
 def run_files() -> list[str]:
@@ -190,9 +198,11 @@ def write_run(
     summary: dict,
     timing: dict,
     meshcat_html: str | None = None,
+    site=None,
 ) -> list[Path]:
     """Writes the run directory's files into ``out_dir`` (which must exist); returns
-    their paths."""
+    their paths. ``site`` (the run's SiteData) puts the science maps over the site
+    hillshade and writes them as GeoTIFFs."""
     out = Path(out_dir)
     paths = [
         atomic_write_text(out / "scenario.yaml", dump_scenario(scenario)),
@@ -245,7 +255,7 @@ def write_run(
               rows)  # fmt: skip
     paths.append(out / "images.csv")
     if logs.science_received:
-        paths += write_science(out, scenario=scenario, logs=logs)
+        paths += write_science(out, scenario=scenario, logs=logs, site=site)
     if logs.keyframes:
         from lunar_drake.perception.ground_pipeline import KeyframeRecord
 

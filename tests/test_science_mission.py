@@ -76,7 +76,22 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
     assert summary["science"]["nss_records"] == len(recs)
     assert summary["science"]["nirvss_records"] == len(nir)
     assert 0.3 < summary["science"]["lcs_rmse_K"] < 3.0  # the 1 K noise, a few samples
-    outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall)
+    outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall, site=site)
+    import rasterio
+
+    for stem, n_bands in (("nss_map", 1), ("nirvss_map", 7), ("lcs_map", 1)):
+        assert (tmp_path / f"{stem}.png").stat().st_size > 1000
+        with rasterio.open(tmp_path / f"{stem}.tif") as ds:
+            assert ds.count == n_bands and ds.crs is not None and ds.res == (2.0, 2.0)
+            a = ds.read()
+        assert np.isfinite(a).any() and np.isnan(a).any()  # cells with and without records
+    ox, oy = site.heightfield.origin_xy
+    with rasterio.open(tmp_path / "nss_map.tif") as ds:
+        assert ds.descriptions == ("weh_wt_pct",)
+        a = ds.read(1)
+        for r in recs:  # every record's cell holds a value, in the site's CRS
+            row, col = ds.index(ox + r.pose_estimate[0], oy + r.pose_estimate[1])
+            assert np.isfinite(a[row, col])
     with open(tmp_path / "nss.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == outputs.NSS_COLUMNS and len(rows) == len(recs)

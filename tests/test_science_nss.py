@@ -78,3 +78,18 @@ def test_bad_nss_config():
         nss.NSSConfig(height_m=0.0).validate()
     with pytest.raises(OutOfRangeError, match="rate_hz"):
         nss.NSSConfig(rate_hz=0.0).validate()
+
+
+def test_records_are_averaged_into_site_aligned_cells():
+    from lunar_drake.science.products import grid_records
+
+    x = np.array([0.5, 1.5, 1.9, -3.1])
+    y = np.array([0.5, 0.2, 1.8, 4.9])
+    g = grid_records(x, y, np.array([1.0, 2.0, 4.0, 8.0]), cell_m=2.0, margin_cells=0)
+    assert (g.x0_m, g.y1_m) == (-4.0, 6.0)  # multiples of the cell
+    # (0.5, 0.5), (1.5, 0.2), (1.9, 1.8) share the cell x in [0, 2), y in [0, 2).
+    r, c = int((6.0 - 0.5) // 2), int((0.5 + 4.0) // 2)
+    assert g.mean[0, r, c] == pytest.approx(7.0 / 3.0) and g.count[r, c] == 3
+    r, c = int((6.0 - 4.9) // 2), int((-3.1 + 4.0) // 2)
+    assert g.mean[0, r, c] == 8.0 and g.count.sum() == 4
+    assert np.isnan(g.mean[0][g.count == 0]).all()

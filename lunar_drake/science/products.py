@@ -7,12 +7,14 @@
 * :func:`nss_truth`: scoring only -- the footprint hydrogen of the world model at the
   rover's *true* position at each sample, and the correlation of the ground's gridded
   estimate with it;
-* :func:`nss_map_png`: the ground's hydrogen heat map along the path.
+* :func:`science_maps`: the ground's maps of each instrument along the path (PNG over
+  the site hillshade, GeoTIFF in the site's CRS).
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
+import math
 
 import numpy as np
 
@@ -97,39 +99,158 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     return {"records": n, "cells": len(keys), "r": r, "truth_weh": truth, "rmse_wt_pct": rmse}
 
 
-def nss_map_png(path, *, logs, scenario, cell_m: float = 2.0) -> None:
-    """The ground's hydrogen heat map: received NSS records averaged over ``cell_m``
-    cells at the on-board estimate, with the estimated path; written atomically."""
+@dc.dataclass(frozen=True)
+class Grid:
+    """Records averaged into square cells of a site-aligned grid: ``mean`` (bands, rows,
+    cols; NaN where empty), ``count`` (rows, cols), west edge ``x0_m``, north edge
+    ``y1_m`` (site m, multiples of ``cell_m``)."""
+
+    mean: np.ndarray
+    count: np.ndarray
+    x0_m: float
+    y1_m: float
+    cell_m: float
+
+    @property
+    def extent(self) -> list:
+        rows, cols = self.count.shape
+        return [self.x0_m, self.x0_m + cols * self.cell_m, self.y1_m - rows * self.cell_m,
+                self.y1_m]  # fmt: skip
+
+
+def grid_records(x, y, values, *, cell_m: float, margin_cells: int = 2) -> Grid | None:
+    """``values`` ((n,) or (n, bands)) averaged over ``cell_m`` cells around the points
+    (x, y) (site m); None without a finite point."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    v = np.asarray(values, np.float64)
+    v = v[:, None] if v.ndim == 1 else v
+    ok = np.isfinite(x) & np.isfinite(y) & np.all(np.isfinite(v), axis=1)
+    if not ok.any():
+        return None
+    x, y, v = x[ok], y[ok], v[ok]
+    x0 = (math.floor(x.min() / cell_m) - margin_cells) * cell_m
+    y1 = (math.floor(y.max() / cell_m) + 1 + margin_cells) * cell_m
+    cols = math.floor((x.max() - x0) / cell_m) + 1 + margin_cells
+    rows = math.floor((y1 - y.min()) / cell_m) + 1 + margin_cells
+    c = np.floor((x - x0) / cell_m).astype(np.int64)
+    r = np.floor((y1 - y) / cell_m).astype(np.int64)
+    total = np.zeros((v.shape[1], rows, cols))
+    count = np.zeros((rows, cols), np.int64)
+    np.add.at(count, (r, c), 1)
+    for b in range(v.shape[1]):
+        np.add.at(total[b], (r, c), v[:, b])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    return Grid(mean, count, float(x0), float(y1), float(cell_m))
+
+
+#: Per instrument: (file stem, band names, value unit, the band shown in the PNG).
+MAPS = {
+    "nss": ("nss_map", ("weh_wt_pct",), "water-equivalent hydrogen (wt%)", 0),
+    "nirvss": ("nirvss_map", None, "band depth (-)", 1),
+    "lcs": ("lcs_map", ("temperature_K",), "surface temperature (K, LCS)", 0),
+}
+
+
+def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> list:
+    """The ground's maps of each instrument along the path, from the records it
+    received placed at the downlinked on-board estimate: ``<stem>.png`` (over the site
+    hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
+    one band per quantity, NaN where no record fell). NSS: water-equivalent hydrogen;
+    NIRVSS: every band (the PNG shows OH); LCS: temperature. Returns the paths."""
+    from pathlib import Path
+
+    from lunar_drake.science.nirvss import BANDS
+
+    out = Path(out_dir)
+    recs = {}
+    nss = nss_table(logs.science_received, config=scenario.sensors.nss)
+    if len(nss):
+        recs["nss"] = (nss.x_m, nss.y_m, nss.weh_est)
+    nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
+    if nir:
+        xy = np.array([r.pose_estimate[:2] for r in nir])
+        vals = np.array([r.values for r in nir])
+        recs["nirvss"] = (xy[:, 0], xy[:, 1], vals[:, :-1])
+        recs["lcs"] = (xy[:, 0], xy[:, 1], vals[:, -1])
+    paths = []
+    for name, (x, y, v) in recs.items():
+        grid = grid_records(x, y, v, cell_m=cell_m)
+        if grid is None:
+            continue
+        stem, bands, unit, shown = MAPS[name]
+        bands = tuple(f"bd_{b}" for b in BANDS) if bands is None else bands
+        _map_png(out / f"{stem}.png", grid, band=shown, x=x, y=y, site=site,
+                 title=f"{name.upper()} on the ground: {len(x)} records, {cell_m:g} m cells "
+                       f"({bands[shown]})", unit=unit)  # fmt: skip
+        paths.append(out / f"{stem}.png")
+        if site is not None:
+            _map_tif(out / f"{stem}.tif", grid, bands=bands, hf=site.heightfield)
+            paths.append(out / f"{stem}.tif")
+    return paths
+
+
+def _map_tif(path, grid: Grid, *, bands, hf) -> None:
+    import os
+
+    import rasterio
+    from rasterio.transform import Affine
+
+    from lunar_drake.files import temp_sibling
+    from lunar_drake.terrain.geotiff import write_geotiff
+
+    ox, oy = hf.origin_xy
+    transform = Affine(grid.cell_m, 0.0, ox + grid.x0_m, 0.0, -grid.cell_m, oy + grid.y1_m)
+    tmp = temp_sibling(path)
+    try:
+        write_geotiff(tmp, grid.mean.astype(np.float32), transform=transform, crs=hf.crs,
+                      nodata=float("nan"))  # fmt: skip
+        with rasterio.open(tmp, "r+") as ds:
+            for k, n in enumerate(bands, start=1):
+                ds.set_band_description(k, n)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) -> None:
     import os
     from pathlib import Path
 
-    from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
     from lunar_drake.files import temp_sibling
 
-    t = nss_table(logs.science_received, config=scenario.sensors.nss)
-    cells = grid_mean(t.x_m, t.y_m, t.weh_est, cell_m=cell_m)
     fig = Figure(figsize=(7.5, 6.2), dpi=110)
     ax = fig.add_subplot(1, 1, 1)
-    if cells:
-        vals = np.array([m for m, _c in cells.values()])
-        norm = Normalize(vmin=min(0.0, float(vals.min())), vmax=max(1.0, float(vals.max())))
-        from matplotlib import colormaps
-        from matplotlib.cm import ScalarMappable
-        from matplotlib.patches import Rectangle
+    ext = grid.extent
+    if site is not None:
+        from lunar_drake.science.thermal import sun_vector, surface_normals
 
-        cmap = colormaps["Blues"]
-        for (i, j), (m, _c) in cells.items():
-            ax.add_patch(Rectangle((i * cell_m, j * cell_m), cell_m, cell_m, color=cmap(norm(m))))
-        fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax,
-                     label="water-equivalent hydrogen (wt%, ground estimate)")  # fmt: skip
-    ax.plot(t.x_m, t.y_m, "-", color="0.3", lw=0.8, label="on-board estimate")
-    ax.set_aspect("equal")
-    ax.autoscale_view()
+        hf = site.heightfield
+        res = hf.resolution_m
+        rows, cols = hf.shape
+        c0 = max(0, math.floor(ext[0] / res + cols / 2))
+        c1 = min(cols, math.ceil(ext[1] / res + cols / 2))
+        r0 = max(0, math.floor(rows / 2 - ext[3] / res))
+        r1 = min(rows, math.ceil(rows / 2 - ext[2] / res))
+        if c1 > c0 + 1 and r1 > r0 + 1:
+            z = np.asarray(hf.read_window(r0, c0, r1 - r0, c1 - c0), np.float64)
+            shade = np.clip(np.tensordot(sun_vector(315.0, 35.0), surface_normals(z, res),
+                                         axes=1), 0, 1)  # fmt: skip
+            hext = [(c0 - cols / 2) * res, (c1 - cols / 2) * res, (rows / 2 - r1) * res,
+                    (rows / 2 - r0) * res]  # fmt: skip
+            ax.imshow(shade, cmap="gray", extent=hext, vmin=0, vmax=1)
+    im = ax.imshow(np.ma.masked_invalid(grid.mean[band]), cmap="Blues" if "hydrogen" in unit
+                   else "viridis", extent=ext, alpha=0.85, interpolation="nearest")  # fmt: skip
+    fig.colorbar(im, ax=ax, label=unit + ", ground estimate", shrink=0.85)
+    ax.plot(x, y, "-", color="0.2", lw=0.7, label="on-board estimate")
+    ax.set_xlim(ext[0], ext[1])
+    ax.set_ylim(ext[2], ext[3])
     ax.set_xlabel("x (m, east)")
     ax.set_ylabel("y (m, north)")
-    ax.set_title(f"NSS on the ground: {len(t)} records, {cell_m:g} m cells")
+    ax.set_title(title, fontsize=10)
     ax.legend(loc="upper right", fontsize=8)
     tmp = temp_sibling(Path(path))
     try:
@@ -140,4 +261,13 @@ def nss_map_png(path, *, logs, scenario, cell_m: float = 2.0) -> None:
             Path(tmp).unlink()
 
 
-__all__ = ["NSSTable", "grid_mean", "nss_map_png", "nss_table", "nss_truth"]
+__all__ = [
+    "MAPS",
+    "Grid",
+    "NSSTable",
+    "grid_mean",
+    "grid_records",
+    "nss_table",
+    "nss_truth",
+    "science_maps",
+]
