@@ -328,8 +328,15 @@ def _cmd_world_build(args) -> int:
             raise ConfigError(f"--config {args.config!r}: {str(exc).splitlines()[0]}") from None
     if args.workers is not None:
         config.workers = args.workers
-    doc = build_world(site_dir=args.site_dir, out_dir=args.out, utc=args.utc, config=config,
-                      seed=args.seed, progress=not args.no_progress)  # fmt: skip
+    from lunar_drake.files import check_replaceable, staged_directory
+    from lunar_drake.science.world import WORLD_FILES
+
+    # Built whole under a temporary name; an earlier world there is replaced only when
+    # this one is complete, and a directory holding anything else is refused.
+    check_replaceable(args.out, allowed=WORLD_FILES, what="world directory")
+    with staged_directory(args.out, what="world directory") as tmp:
+        doc = build_world(site_dir=args.site_dir, out_dir=tmp, utc=args.utc, config=config,
+                          seed=args.seed, progress=not args.no_progress)  # fmt: skip
     layers = doc["layers"]
     print(
         f"World model of {args.site_dir} at {doc['utc']} ({doc['shape'][0]} x {doc['shape'][1]} "

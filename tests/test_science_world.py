@@ -307,3 +307,40 @@ def test_world_config_file_and_bad_layers_on_disk(small_site, tmp_path, capsys):
     )
     with pytest.raises(WorldModelError, match="temperature_K"):
         read_world_layer(out, "temperature_K")
+
+
+def test_world_build_bad_sites_and_outputs(small_site, tmp_path, capsys):
+    import shutil
+
+    import rasterio
+
+    from lunar_drake.cli import main
+
+    _scenario, site = small_site
+    src = site.site.directory
+    cases = []
+    bad_csv = tmp_path / "bad_csv"
+    bad_csv.mkdir()
+    for name in ("dem.tif", "site.json"):
+        shutil.copy(src / name, bad_csv / name)
+    (bad_csv / "craters.csv").write_text("x_m,y_m,diameter_m,age_yr\n1,2,abc,4\n")
+    cases.append((bad_csv, "not a numeric crater table"))
+    holes = tmp_path / "holes"
+    shutil.copytree(src, holes)
+    with rasterio.open(holes / "dem.tif", "r+") as ds:
+        z = ds.read(1)
+        z[3, 4] = np.nan
+        ds.write(z, 1)
+    cases.append((holes, "1 nodata cells"))
+    for site_dir, msg in cases:
+        out = tmp_path / f"w_{site_dir.name}"
+        assert main(["world", "build", str(site_dir), "--out", str(out), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert msg in err and len(err.splitlines()) == 1
+        assert not out.exists()  # nothing half-written
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep me")
+    assert main(["world", "build", str(src), "--out", str(mine), "--no-progress"]) == 2
+    assert "notes.txt" in capsys.readouterr().err
+    assert (mine / "notes.txt").read_text() == "keep me"

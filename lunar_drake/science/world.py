@@ -116,9 +116,24 @@ def read_craters(path) -> Craters:
     missing = [c for c in need if c not in header]
     if missing:
         raise WorldModelError(f"{str(p)!r} lacks column(s) {missing}; it has {header}")
-    data = np.loadtxt(p, delimiter=",", skiprows=1, ndmin=2)
+    try:
+        data = np.loadtxt(p, delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as exc:
+        raise WorldModelError(f"{str(p)!r} is not a numeric crater table: {exc}") from None
     cols = {c: data[:, header.index(c)] if data.size else np.zeros(0) for c in need}
+    bad = ~np.isfinite(np.column_stack(list(cols.values()))).all(axis=1) if data.size else []
+    if np.any(bad) or (data.size and (cols["diameter_m"] <= 0).any()):
+        row = int(np.argmax(bad)) if np.any(bad) else int(np.argmax(cols["diameter_m"] <= 0))
+        raise WorldModelError(
+            f"{str(p)!r} row {row + 2}: crater values must be finite with diameter_m > 0"
+        )
     return Craters(**cols)
+
+
+#: Every file a world directory may hold (a rebuild may replace a directory of only these).
+WORLD_FILES = frozenset(
+    [*(f"{n}.tif" for n in LAYERS), *(f"{n}.png" for n in LAYERS), "world.png", "world.json"]
+)
 
 
 @dc.dataclass(frozen=True)
@@ -290,6 +305,11 @@ def build_world(
     hf = Heightfield.open(dem)
     try:
         z = hf.read_window(0, 0, *hf.shape)
+        holes = int(np.count_nonzero(~np.isfinite(z)))
+        if holes:
+            raise WorldModelError(
+                f"{str(dem)!r} has {holes} nodata cells; the world model needs a complete DEM"
+            )
         env = sun_envelope(hf, utc=utc, config=cfg.sun)
         site, beta = site_and_grid_north(hf, enu_basis=enu_basis, SiteLocation=SiteLocation)
         se = sun_earth_enu(utc=utc, site=site)
@@ -635,6 +655,7 @@ def _progress_bar(enabled: bool):
 
 __all__ = [
     "LAYERS",
+    "WORLD_FILES",
     "Craters",
     "World",
     "WorldModelError",
