@@ -191,42 +191,27 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
 
 
 def _map_tif(path, grid: Grid, *, bands, hf) -> None:
-    import os
-
-    import rasterio
     from rasterio.transform import Affine
 
-    from lunar_drake.files import temp_sibling
-    from lunar_drake.terrain.geotiff import write_geotiff
+    from lunar_drake.science.world import write_named_bands
 
     ox, oy = hf.origin_xy
     transform = Affine(grid.cell_m, 0.0, ox + grid.x0_m, 0.0, -grid.cell_m, oy + grid.y1_m)
-    tmp = temp_sibling(path)
-    try:
-        write_geotiff(tmp, grid.mean.astype(np.float32), transform=transform, crs=hf.crs,
-                      nodata=float("nan"))  # fmt: skip
-        with rasterio.open(tmp, "r+") as ds:
-            for k, n in enumerate(bands, start=1):
-                ds.set_band_description(k, n)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    write_named_bands(path, grid.mean.astype(np.float32), names=bands, transform=transform,
+                      crs=hf.crs, nodata=float("nan"))  # fmt: skip
 
 
 def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) -> None:
-    import os
-    from pathlib import Path
 
     from matplotlib.figure import Figure
 
-    from lunar_drake.files import temp_sibling
+    from lunar_drake.files import atomic_path
 
     fig = Figure(figsize=(7.5, 6.2), dpi=110)
     ax = fig.add_subplot(1, 1, 1)
     ext = grid.extent
     if site is not None:
-        from lunar_drake.science.thermal import sun_vector, surface_normals
+        from lunar_drake.science.world import hillshade
 
         hf = site.heightfield
         res = hf.resolution_m
@@ -236,9 +221,7 @@ def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) 
         r0 = max(0, math.floor(rows / 2 - ext[3] / res))
         r1 = min(rows, math.ceil(rows / 2 - ext[2] / res))
         if c1 > c0 + 1 and r1 > r0 + 1:
-            z = np.asarray(hf.read_window(r0, c0, r1 - r0, c1 - c0), np.float64)
-            shade = np.clip(np.tensordot(sun_vector(315.0, 35.0), surface_normals(z, res),
-                                         axes=1), 0, 1)  # fmt: skip
+            shade = hillshade(np.asarray(hf.read_window(r0, c0, r1 - r0, c1 - c0)), res)
             hext = [(c0 - cols / 2) * res, (c1 - cols / 2) * res, (rows / 2 - r1) * res,
                     (rows / 2 - r0) * res]  # fmt: skip
             ax.imshow(shade, cmap="gray", extent=hext, vmin=0, vmax=1)
@@ -252,13 +235,8 @@ def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) 
     ax.set_ylabel("y (m, north)")
     ax.set_title(title, fontsize=10)
     ax.legend(loc="upper right", fontsize=8)
-    tmp = temp_sibling(Path(path))
-    try:
+    with atomic_path(path, what="figure") as tmp:
         fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
-    finally:
-        if Path(tmp).exists():
-            Path(tmp).unlink()
 
 
 __all__ = [

@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -375,7 +374,7 @@ def write_world(
     for name, arr in world.layers.items():
         path = out / f"{name}.tif"
         if name == "minerals":
-            _write_named_bands(path, arr, names=MINERALS, transform=world.transform, crs=world.crs)
+            write_named_bands(path, arr, names=MINERALS, transform=world.transform, crs=world.crs)
         else:
             write_geotiff(path, arr, transform=world.transform, crs=world.crs)
         a = np.asarray(arr, np.float64)
@@ -420,22 +419,19 @@ def write_world(
     return summary
 
 
-def _write_named_bands(path: Path, arr, *, names, transform, crs) -> None:
+def write_named_bands(path, arr, *, names, transform, crs, nodata=None) -> None:
+    """A GeoTIFF (atomic, :func:`~lunar_drake.terrain.geotiff.write_geotiff`) whose bands
+    carry ``names`` as their descriptions."""
     import rasterio
 
-    from lunar_drake.files import temp_sibling
+    from lunar_drake.files import atomic_path
     from lunar_drake.terrain.geotiff import write_geotiff
 
-    tmp = temp_sibling(path)
-    try:
-        write_geotiff(tmp, arr, transform=transform, crs=crs)
+    with atomic_path(path, what="raster") as tmp:
+        write_geotiff(tmp, arr, transform=transform, crs=crs, nodata=nodata)
         with rasterio.open(tmp, "r+") as ds:
             for k, n in enumerate(names, start=1):
                 ds.set_band_description(k, n)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
@@ -480,46 +476,36 @@ def cached_world(
     return {n: read_world_layer(d, n) for n in (names or LAYERS)}
 
 
-def hydrogen_map(*, scenario, site, progress: bool = False):
-    """The :class:`~lunar_drake.science.nss.HydrogenMap` of a run's site at its epoch
-    (the world model, built on first use and cached: :func:`cached_world`)."""
-    from lunar_drake.science.nss import HydrogenMap
-
+def site_layers(*, scenario, site, names, who: str, progress: bool = False) -> dict:
+    """Layers ``names`` of a run's site at its epoch (the world model, built on first
+    use and cached: :func:`cached_world`); ``who`` names the instrument in the error a
+    site without a crater catalog raises."""
     directory = site.site.directory
     if directory is None or not (Path(directory) / "craters.csv").is_file():
         raise WorldModelError(
-            f"sensors.nss needs a synthesized site with a crater catalog; the site "
+            f"{who} needs a synthesized site with a crater catalog; the site "
             f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
         )
-    layers = cached_world(
-        directory,
-        utc=scenario.site.epoch_utc,
-        config=scenario.science,
-        names=("dry_layer_m", "ice_wt_pct", "h_minerals_ppm"),
-        progress=progress,
-    )
+    return cached_world(directory, utc=scenario.site.epoch_utc, config=scenario.science,
+                        names=names, progress=progress)  # fmt: skip
+
+
+def hydrogen_map(*, scenario, site, progress: bool = False):
+    """The :class:`~lunar_drake.science.nss.HydrogenMap` of a run's site at its epoch."""
+    from lunar_drake.science.nss import HydrogenMap
+
+    layers = site_layers(scenario=scenario, site=site, who="sensors.nss", progress=progress,
+                         names=("dry_layer_m", "ice_wt_pct", "h_minerals_ppm"))  # fmt: skip
     return HydrogenMap.centred(**layers, resolution_m=site.heightfield.resolution_m)
 
 
 def surface_map(*, scenario, site, progress: bool = False):
-    """The :class:`~lunar_drake.science.nirvss.SurfaceMap` of a run's site at its epoch
-    (cached world model, :func:`cached_world`)."""
+    """The :class:`~lunar_drake.science.nirvss.SurfaceMap` of a run's site at its epoch."""
     from lunar_drake.science.nirvss import LAYERS as NIRVSS_LAYERS
     from lunar_drake.science.nirvss import SurfaceMap
 
-    directory = site.site.directory
-    if directory is None or not (Path(directory) / "craters.csv").is_file():
-        raise WorldModelError(
-            f"sensors.nirvss needs a synthesized site with a crater catalog; the site "
-            f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
-        )
-    layers = cached_world(
-        directory,
-        utc=scenario.site.epoch_utc,
-        config=scenario.science,
-        names=NIRVSS_LAYERS,
-        progress=progress,
-    )
+    layers = site_layers(scenario=scenario, site=site, who="sensors.nirvss",
+                         names=NIRVSS_LAYERS, progress=progress)  # fmt: skip
     return SurfaceMap.centred(layers, resolution_m=site.heightfield.resolution_m)
 
 
@@ -544,7 +530,7 @@ def heat_map(path, arr, *, name: str, resolution_m: float, z=None, max_px: int =
     and site-metre axes; written atomically."""
     from matplotlib.figure import Figure
 
-    from lunar_drake.files import temp_sibling
+    from lunar_drake.files import atomic_path
 
     a = np.asarray(arr, np.float64)
     title = name
@@ -564,7 +550,7 @@ def heat_map(path, arr, *, name: str, resolution_m: float, z=None, max_px: int =
     ax = fig.add_subplot(1, 1, 1)
     if z is not None:
         ax.imshow(
-            _hillshade(np.asarray(z, np.float64)[::step, ::step], resolution_m * step),
+            hillshade(np.asarray(z, np.float64)[::step, ::step], resolution_m * step),
             cmap="gray",
             extent=ext,
             vmin=0,
@@ -576,13 +562,8 @@ def heat_map(path, arr, *, name: str, resolution_m: float, z=None, max_px: int =
     ax.set_xlabel("x (m, east)")
     ax.set_ylabel("y (m, north)")
     ax.set_title(title)
-    tmp = temp_sibling(Path(path))
-    try:
+    with atomic_path(path, what="figure") as tmp:
         fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
-    finally:
-        if Path(tmp).exists():
-            Path(tmp).unlink()
 
 
 #: The panels of ``world.png``.
@@ -595,7 +576,7 @@ def overview(
     """``world.png``: the six main layers side by side over the hillshade."""
     from matplotlib.figure import Figure
 
-    from lunar_drake.files import temp_sibling
+    from lunar_drake.files import atomic_path
 
     fig = Figure(figsize=(15, 9.6), dpi=90)
     for k, name in enumerate(OVERVIEW_LAYERS):
@@ -608,7 +589,7 @@ def overview(
         ax = fig.add_subplot(2, 3, k + 1)
         if z is not None:
             zz = np.asarray(z, np.float64)[::step, ::step]
-            ax.imshow(_hillshade(zz, resolution_m * step), cmap="gray", extent=ext, vmin=0, vmax=1)
+            ax.imshow(hillshade(zz, resolution_m * step), cmap="gray", extent=ext, vmin=0, vmax=1)
         unit, _, cmap = LAYERS[name]
         im = ax.imshow(
             a, cmap=cmap, extent=ext, alpha=0.75 if z is not None else 1.0, interpolation="nearest"
@@ -619,16 +600,12 @@ def overview(
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    tmp = temp_sibling(Path(path))
-    try:
+    with atomic_path(path, what="figure") as tmp:
         fig.savefig(tmp, format="png")
-        os.replace(tmp, path)
-    finally:
-        if Path(tmp).exists():
-            Path(tmp).unlink()
 
 
-def _hillshade(z: np.ndarray, res: float, az_deg: float = 315.0, el_deg: float = 35.0):
+def hillshade(z: np.ndarray, res: float, az_deg: float = 315.0, el_deg: float = 35.0):
+    """Shaded relief in [0, 1] of DEM ``z`` (pixel ``res`` m) lit from ``az_deg``, ``el_deg``."""
     n = thermal.surface_normals(z, res)
     return np.clip(np.tensordot(thermal.sun_vector(az_deg, el_deg), n, axes=1), 0.0, 1.0)
 
@@ -665,11 +642,13 @@ __all__ = [
     "compute_world",
     "default_utc",
     "heat_map",
+    "hillshade",
     "hydrogen_map",
     "overview",
     "read_craters",
     "read_world_layer",
     "surface_map",
     "world_key",
+    "write_named_bands",
     "write_world",
 ]

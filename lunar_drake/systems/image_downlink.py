@@ -7,10 +7,11 @@ import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, encode_frames
-from lunar_drake.comms.messages import Ledger, Message
+from lunar_drake.comms.messages import Message
+from lunar_drake.systems.receiver import TopicReceiver
 
 TOPIC = "images"
 
@@ -110,43 +111,12 @@ class ImagePacketizer(LeafSystem):
         state.get_mutable_abstract_state(self._state).set_value((k, sent, outbox))
 
 
-class ImageReceiver(LeafSystem):
-    """Ground: takes in the stereo frames the downlink delivered, in order, once each.
-
-    .. pydrake_system::
-
-        name: ImageReceiver
-        input_ports:
-        - images
-        output_ports:
-        - frames_received
-
-    Every 1 / ``rate_hz`` s deliveries newer than the last handled are appended to the
-    received ledger (abstract state; :meth:`received`). ``frames_received`` (1,) counts
-    them.
-    """
+class ImageReceiver(TopicReceiver):
+    """Ground: takes in the stereo frames the downlink delivered, in order, once each
+    (:class:`~lunar_drake.systems.receiver.TopicReceiver` of ``images``;
+    ``frames_received`` (1,) counts them)."""
 
     def __init__(self, *, rate_hz: float):
-        super().__init__()
-        self.images_input = self.DeclareAbstractInputPort(TOPIC, AbstractValue.Make(()))
-        self._ledger = self.DeclareAbstractState(AbstractValue.Make((-1, Ledger())))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
-        self.frames_received_output = self.DeclareVectorOutputPort(
-            "frames_received",
-            BasicVector(1),
-            lambda c, o: o.SetFromVector([len(c.get_abstract_state(self._ledger).get_value()[1])]),
-            prerequisites_of_calc={self.all_state_ticket()},
-        )
-
-    def received(self, context) -> list:
-        """Every delivery handled so far (oldest first), in this system's context."""
-        return context.get_abstract_state(self._ledger).get_value()[1].items()
-
-    def _update(self, context, state):
-        last, ledger = context.get_abstract_state(self._ledger).get_value()
-        new = [d for d in self.images_input.Eval(context) if d.message.seq > last]
-        if not new:
-            return
-        for d in new:
-            ledger = ledger.append(d)
-        state.get_mutable_abstract_state(self._ledger).set_value((new[-1].message.seq, ledger))
+        super().__init__(topic=TOPIC, count_name="frames_received", rate_hz=rate_hz)
+        self.images_input = self.inbox_input
+        self.frames_received_output = self.count_output

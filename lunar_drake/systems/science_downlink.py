@@ -7,11 +7,12 @@ import dataclasses as dc
 import math
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
-from lunar_drake.comms.messages import Ledger, Message
+from lunar_drake.comms.messages import Message
 from lunar_drake.comms.science import TOPIC, ScienceRecord
 from lunar_drake.sensors.sampling import delivered_index
+from lunar_drake.systems.receiver import TopicReceiver
 
 #: How often the packetizer looks for new instrument samples (s).
 TICK_S = 0.1
@@ -102,43 +103,13 @@ class SciencePacketizer(LeafSystem):
             )
 
 
-class ScienceReceiver(LeafSystem):
-    """Ground: takes in the science records the downlink delivered, once each.
-
-    .. pydrake_system::
-
-        name: ScienceReceiver
-        input_ports:
-        - science
-        output_ports:
-        - records_received
-
-    Every 1 / ``rate_hz`` s deliveries newer than the last handled are appended to the
-    received ledger (abstract state; :meth:`received`).
-    """
+class ScienceReceiver(TopicReceiver):
+    """Ground: takes in the science records the downlink delivered, once each, in seq
+    order (:class:`~lunar_drake.systems.receiver.TopicReceiver` of ``science``;
+    ``records_received`` (1,) counts them)."""
 
     def __init__(self, *, rate_hz: float):
-        super().__init__()
-        self.science_input = self.DeclareAbstractInputPort(TOPIC, AbstractValue.Make(()))
-        self._ledger = self.DeclareAbstractState(AbstractValue.Make((-1, Ledger())))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
-        self.records_received_output = self.DeclareVectorOutputPort(
-            "records_received",
-            BasicVector(1),
-            lambda c, o: o.SetFromVector([len(c.get_abstract_state(self._ledger).get_value()[1])]),
-            prerequisites_of_calc={self.all_state_ticket()},
-        )
-
-    def received(self, context) -> list:
-        """Every delivery handled so far (oldest first), in this system's context."""
-        return context.get_abstract_state(self._ledger).get_value()[1].items()
-
-    def _update(self, context, state):
-        last, ledger = context.get_abstract_state(self._ledger).get_value()
-        new = [d for d in self.science_input.Eval(context) if d.message.seq > last]
-        if not new:
-            return
-        for d in sorted(new, key=lambda d: d.message.seq):
-            ledger = ledger.append(d)
-        state.get_mutable_abstract_state(self._ledger).set_value((ledger.items()[-1].message.seq,
-                                                                   ledger))  # fmt: skip
+        super().__init__(topic=TOPIC, count_name="records_received", rate_hz=rate_hz,
+                         by_seq=True)  # fmt: skip
+        self.science_input = self.inbox_input
+        self.records_received_output = self.count_output
