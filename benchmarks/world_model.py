@@ -6,8 +6,9 @@
 A site of ``--size``^2 pixels at ``--resolution`` (4 cm) is synthesized first (``terrain
 synth``, cached under ``--cache``; not timed), then ``lunar-drake world build`` runs in
 a child process: ``seconds`` is its wall time and ``peak_rss_mb`` its peak resident
-memory (``getrusage`` of the child). Goals (issue 15): 8192^2 in <= 60 s and <= 4 GB;
-30720^2 within 15 minutes and 4 GB. Prints a table; writes JSON with --out.
+memory (``getrusage`` of the child); ``stage_seconds`` comes from the build's
+``world.json``. Goals (issue 15): 8192^2 in <= 60 s and <= 4 GB; 30720^2 within 15
+minutes and 4 GB. Prints a table; writes JSON with --out.
 """
 
 from __future__ import annotations
@@ -69,12 +70,15 @@ def main(argv=None) -> int:
         "seconds": round(seconds, 2),
         "peak_rss_mb": round(peak_kb / 1024.0, 1),
         "psr_fraction": world["psr_fraction"],
+        "stage_seconds": world.get("stage_seconds", {}),
         "workers": args.workers,
         "machine": platform.platform(),
     }
     print(f"{'size':>8} {'pixel m':>8} {'seconds':>9} {'peak MB':>9} {'PSR %':>7}")
     print(f"{args.size:>8} {args.resolution:>8g} {doc['seconds']:>9.1f} "
           f"{doc['peak_rss_mb']:>9.0f} {100 * doc['psr_fraction']:>7.2f}")  # fmt: skip
+    for stage, sec in doc["stage_seconds"].items():
+        print(f"  {stage:<40} {sec:>7.1f} s")
     if args.out:
         atomic_write_text(args.out, json.dumps(doc, indent=2) + "\n")
     return 0

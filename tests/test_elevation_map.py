@@ -2,6 +2,7 @@
 planes and a boulder sampled by rays cast here (a pinhole on a mast, hits solved in
 closed form, depth noise of a stereo rig), references computed by hand."""
 
+import dataclasses as dc
 import math
 
 import numpy as np
@@ -438,3 +439,20 @@ def test_a_coarse_costmap_is_refined_with_its_lethal_cells_in_place():
     d = np.min(np.hypot(rr[..., None] - lr, cc[..., None] - lc), axis=-1) * 0.5
     np.testing.assert_array_equal(np.isinf(fine.cost), d <= ROVER.footprint_radius_m + 0.2)
     assert refined_costmap(fine, resolution_m=0.5, rover=ROVER, hazards=HazardConfig()) is fine
+
+
+def test_a_rock_seen_once_counts_only_when_it_stands_far_over_the_limit(boulder):
+    em, cfg = boulder["map"], boulder["config"]  # one cloud: every cell seen once
+    twice = dc.replace(cfg, min_views=2)
+    hz = stereo_hazards(em, hazards=boulder["hazards"], rover=ROVER, config=twice)
+    assert not hz.known.any() and not hz.lethal.any()  # not trusted yet
+    # The 0.3 m boulder is 1.5 times this rover's 0.2 m step limit.
+    tall = stereo_hazards(em, hazards=boulder["hazards"], rover=ROVER,
+                          config=dc.replace(twice, tall_views=1, tall_factor=1.2))  # fmt: skip
+    lr, lc = np.nonzero(tall.lethal)
+    assert tall.lethal[em.cell_of(0.0, 0.0)] and len(lr) >= 3
+    assert _dist_to_boulder(em, lr, lc).max() < BOULDER_R + 0.3
+    assert np.array_equal(tall.known, tall.lethal)  # only the tall cells were let in
+    low = stereo_hazards(em, hazards=boulder["hazards"], rover=ROVER,
+                         config=dc.replace(twice, tall_views=1, tall_factor=2.0))  # fmt: skip
+    assert not low.lethal.any()

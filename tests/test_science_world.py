@@ -84,10 +84,10 @@ def test_temperature_is_radiative_equilibrium_facing_the_sun():
     z = np.repeat((-south * math.tan(math.radians(30)))[:, None], 64, axis=1)
     cfg = ThermalConfig()
     q = thermal.direct_flux_at(
-        z, resolution_m=0.5, sun_azimuth_deg=180.0, sun_elevation_deg=60.0, config=cfg, tile_px=4096
+        z, resolution_m=0.5, sun_azimuth_deg=180.0, sun_elevation_deg=60.0, config=cfg
     )
-    view = thermal.view_factor(z, resolution_m=0.5, config=cfg, tile_px=4096)
-    t = thermal.temperature(q, view=view, resolution_m=0.5, config=cfg)
+    view = thermal.view_factor(z, resolution_m=0.5, config=cfg)
+    t = thermal.temperature(q, z=z, resolution_m=0.5, config=cfg)
     # (1 - 0.12) 1361 W/m^2 + 16 mW/m^2 = 0.95 * 5.670374419e-8 T^4
     expected = ((0.88 * 1361.0 + 0.016) / (0.95 * 5.670374419e-8)) ** 0.25
     assert expected == pytest.approx(386.2, abs=0.1)
@@ -99,11 +99,10 @@ def test_temperature_is_radiative_equilibrium_facing_the_sun():
 def test_shadow_is_warmed_by_sunlit_terrain(bowl_world):
     z, r, _env, _craters = _bowl_site()
     cfg = ThermalConfig()
-    view = thermal.view_factor(z, resolution_m=RES, config=cfg, tile_px=4096)
     q = np.zeros(z.shape)
-    cold = thermal.temperature(q, view=view, resolution_m=RES, config=cfg)
+    cold = thermal.temperature(q, z=z, resolution_m=RES, config=cfg)
     q_lit = np.where(r > 9, 150.0, 0.0)  # only the plain is lit
-    warm = thermal.temperature(q_lit, view=view, resolution_m=RES, config=cfg)
+    warm = thermal.temperature(q_lit, z=z, resolution_m=RES, config=cfg)
     floor = (0.016 / (0.95 * 5.670374419e-8)) ** 0.25
     assert cold.min() == pytest.approx(floor) and cold.max() < floor + 0.5  # geothermal: ~23 K
     assert warm[N // 2, N // 2 + 20] > floor + 20  # the bowl's wall sees the lit plain
@@ -178,6 +177,31 @@ def test_tile_size_never_changes_a_byte():
         )
     for name in out[0]:
         assert out[0][name].tobytes() == out[1][name].tobytes(), name
+
+
+def test_written_files_do_not_depend_on_the_block_size(tmp_path):
+    from affine import Affine
+
+    from lunar_drake.science.minerals import minerals_wt_pct
+    from lunar_drake.science.world import FileSink
+    from lunar_drake.terrain.crs import moon_south_polar_stereographic
+
+    rng = np.random.default_rng(2)
+    temp = rng.uniform(40.0, 300.0, size=(300, 70)).astype(np.float32)
+    minerals = minerals_wt_pct(1, window=(0, 0, 300, 70), resolution_m=0.5)
+    crs = moon_south_polar_stereographic()
+    transform = Affine(0.5, 0, 73000.0, 0, -0.5, 118000.0)
+    digests = []
+    for step in (64, 256, 300):
+        out = tmp_path / f"b{step}"
+        out.mkdir()
+        with FileSink(out, shape=temp.shape, transform=transform, crs=crs) as sink:
+            for r0 in range(0, 300, step):
+                sink.put("temperature_K", r0, temp[r0 : r0 + step])
+                sink.put("minerals", r0, minerals[:, r0 : r0 + step])
+        digests.append([(out / f).read_bytes() for f in ("temperature_K.tif", "minerals.tif")])
+        assert sink.summary()["temperature_K"]["max"] == pytest.approx(float(temp.max()))
+    assert digests[0] == digests[1] == digests[2]
 
 
 def test_minerals_are_tile_invariant_and_sum_to_100():

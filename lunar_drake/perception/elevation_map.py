@@ -38,7 +38,10 @@ say: relief within the cell, frames misregistered by the pose estimate). A cell 
 heights, the unknown cells first filled -- from a prior DEM shifted by the median
 stereo-minus-prior height of the known cells (the two maps' vertical offset: datum,
 pose drift), or else by the nearest known cell -- and the layers kept on known cells
-only. A known cell is *lethal* when its slope or step is over the limit.
+only. A known cell is *lethal* when its slope or step is over the limit. With
+``tall_views`` set, a cell seen in fewer than ``min_views`` clouds (but at least
+``tall_views``) counts too when its step, on the surface with it included, is over
+``tall_factor`` times the limit: a rock that stands out that much is believed sooner.
 
 **Merging** (:func:`merge_into_costmap`): each known cell goes to the planning cell
 holding its centre. A planning cell takes the larger of the prior's and stereo's slope,
@@ -94,6 +97,11 @@ class ElevationMapConfig:
         min_views: clouds a known cell was seen in at least, >= 1 (wrong stereo matches
             come in patches that move with the view; rocks stay put).
         max_sigma_m: the largest height sigma of a known cell (m), > 0.
+        tall_views: clouds enough for a cell whose step is over ``tall_factor`` times the
+            rover's limit to count, >= 0 (0: no exception to ``min_views``): a rock that
+            stands out that much is believed sooner than a low bump (one seen in shadow,
+            or at the edge of the view, may be seen only once or twice).
+        tall_factor: how far over the step limit such a cell must be, >= 1.
     """
 
     cell_m: float = 0.1
@@ -108,6 +116,8 @@ class ElevationMapConfig:
     min_points: int = 3
     min_views: int = 1
     max_sigma_m: float = 0.05
+    tall_views: int = 0
+    tall_factor: float = 1.5
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -129,6 +139,10 @@ class ElevationMapConfig:
             raise ConfigError(f"min_views = {self.min_views!r} must be an integer")
         check_range("min_views", self.min_views, 1, 1_000_000)
         check_range("max_sigma_m", self.max_sigma_m, 0.0, 100.0, lo_open=True, unit=" m")
+        if isinstance(self.tall_views, bool) or not isinstance(self.tall_views, int | np.integer):
+            raise ConfigError(f"tall_views = {self.tall_views!r} must be an integer")
+        check_range("tall_views", self.tall_views, 0, 1_000_000)
+        check_range("tall_factor", self.tall_factor, 1.0, 100.0)
 
     @classmethod
     def for_rig(cls, calib, **overrides) -> "ElevationMapConfig":
@@ -361,26 +375,40 @@ def stereo_hazards(emap: ElevationMap, *, hazards: HazardConfig, rover: RoverEnv
     if surface not in ("mean", "max"):
         raise ConfigError(f"surface = {surface!r} is unknown; choose one of ('mean', 'max')")
     known = emap.known(config)
+    few = np.zeros(emap.shape, bool)
+    if 0 < config.tall_views < config.min_views:  # seen too few times, unless tall
+        few = emap.known(dc.replace(config, min_views=config.tall_views)) & ~known
     h = emap.height_m if surface == "mean" else emap.z_max_m
     geo = {"x0_m": emap.x0_m, "y1_m": emap.y1_m, "cell_m": emap.cell_m}
     zeros = np.zeros(emap.shape)
-    if not known.any():
+    if not known.any() and not few.any():
         filled = zeros if prior is None else _prior_on(emap, prior)
         return StereoHazards(zeros, zeros.copy(), zeros.copy(), np.zeros(emap.shape, bool),
                              known, filled, **geo)  # fmt: skip
-    if prior is not None:
-        base = _prior_on(emap, prior)
-        offset = float(np.median(h[known] - base[known]))
-        filled = np.where(known, h, base + offset)
-    else:
-        _, (ri, ci) = ndimage.distance_transform_edt(~known, return_indices=True)
-        filled = h[ri, ci]
+    base = None if prior is None else _prior_on(emap, prior)
+
+    def fill(cells):
+        if base is not None:
+            offset = float(np.median(h[cells] - base[cells]))
+            return np.where(cells, h, base + offset)
+        _, (ri, ci) = ndimage.distance_transform_edt(~cells, return_indices=True)
+        return h[ri, ci]
+
     baseline, window, max_step = hazard_limits(hazards, rover)
-    slope, step, rough = hazard_layers(
-        filled, resolution_m=emap.cell_m, baseline_m=baseline, step_window_m=window
-    )
-    slope, step, rough = (np.where(known, a, 0.0) for a in (slope, step, rough))
+
+    def layers(surface_m):
+        return hazard_layers(surface_m, resolution_m=emap.cell_m, baseline_m=baseline,
+                             step_window_m=window)  # fmt: skip
+
+    filled = fill(known if known.any() else few)
+    slope, step, rough = (np.where(known, a, 0.0) for a in layers(filled))
     lethal = known & ((slope > hazards.max_slope_deg) | (step > max_step))
+    if few.any():
+        slope2, step2, rough2 = layers(fill(known | few))
+        tall = few & (step2 > config.tall_factor * max_step)
+        known, lethal = known | tall, lethal | tall
+        slope, step, rough = (np.where(tall, b, a) for a, b in
+                              ((slope, slope2), (step, step2), (rough, rough2)))  # fmt: skip
     return StereoHazards(slope, step, rough, lethal, known, filled, **geo)
 
 

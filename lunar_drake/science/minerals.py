@@ -11,37 +11,61 @@ node weight) and mapped log-normally.
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.science.config import MINERALS, MineralConfig
 
 
-def _fade(t: np.ndarray) -> np.ndarray:
-    return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _add_octave(total, nodes, ny0, nx0, row0, col0, step, weight):  # pragma: no cover
+    """``total += weight (value noise - 0.5)`` on the window at ``(row0, col0)``: lattice
+    coordinates ``(index + 0.5) step`` (``step`` = pixel / scale), node values ``nodes``
+    from lattice node ``(ny0, nx0)``, blended with the quintic fade."""
+    rows, cols = total.shape
+    fxs = np.empty(cols)
+    cxs = np.empty(cols, np.int64)
+    for j in range(cols):
+        x = (col0 + j + 0.5) * step
+        ix = math.floor(x)
+        tx = x - ix
+        fxs[j] = tx * tx * tx * (tx * (tx * 6.0 - 15.0) + 10.0)
+        cxs[j] = int(ix) - nx0
+    for i in numba.prange(rows):
+        y = (row0 + i + 0.5) * step
+        iy = math.floor(y)
+        ty = y - iy
+        fy = ty * ty * ty * (ty * (ty * 6.0 - 15.0) + 10.0)
+        ry = int(iy) - ny0
+        for j in range(cols):
+            fx = fxs[j]
+            cx = cxs[j]
+            top = nodes[ry, cx] * (1 - fx) + nodes[ry, cx + 1] * fx
+            bottom = nodes[ry + 1, cx] * (1 - fx) + nodes[ry + 1, cx + 1] * fx
+            total[i, j] += weight * (top * (1 - fy) + bottom * fy - 0.5)
 
 
 def value_noise(key: int, *, rows, cols, resolution_m: float, scale_m: float) -> np.ndarray:
-    """Value noise in [0, 1) at global cells ``rows`` x ``cols`` (1-D integer arrays) for
-    lattice spacing ``scale_m``."""
-    y = (np.asarray(rows, np.float64) + 0.5) * resolution_m / scale_m
-    x = (np.asarray(cols, np.float64) + 0.5) * resolution_m / scale_m
-    iy, ix = np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
-    fy, fx = _fade(y - iy)[:, None], _fade(x - ix)[None, :]
-    # Node values on the lattice covering the window, then gathered per cell.
-    ny0, nx0 = int(iy.min()), int(ix.min())
-    ni, nj = np.meshgrid(
-        np.arange(ny0, int(iy.max()) + 2), np.arange(nx0, int(ix.max()) + 2), indexing="ij"
-    )
+    """Value noise in [0, 1) at global cells ``rows`` x ``cols`` (contiguous 1-D integer
+    ranges) for lattice spacing ``scale_m``."""
+    rows, cols = np.asarray(rows), np.asarray(cols)
+    total = np.full((rows.size, cols.size), 0.5)
+    _octave(total, key, int(rows[0]), int(cols[0]), resolution_m / scale_m, 1.0)
+    return total
+
+
+def _octave(total, key: int, row0: int, col0: int, step: float, weight: float) -> None:
+    rows, cols = total.shape
+    ny0 = math.floor((row0 + 0.5) * step)
+    nx0 = math.floor((col0 + 0.5) * step)
+    ny1 = math.floor((row0 + rows - 0.5) * step) + 1
+    nx1 = math.floor((col0 + cols - 0.5) * step) + 1
+    ni, nj = np.meshgrid(np.arange(ny0, ny1 + 1), np.arange(nx0, nx1 + 1), indexing="ij")
     nodes = rng.hash_uniform(key, ni, nj)
-    ry, cx = iy - ny0, ix - nx0
-
-    def node(di, dj):
-        return nodes[np.ix_(ry + di, cx + dj)]
-
-    top = node(0, 0) * (1 - fx) + node(0, 1) * fx
-    bottom = node(1, 0) * (1 - fx) + node(1, 1) * fx
-    return top * (1 - fy) + bottom * fy
+    _add_octave(total, nodes, ny0, nx0, row0, col0, step, weight)
 
 
 def fractal_noise(
@@ -56,62 +80,139 @@ def fractal_noise(
     scales_m,
 ) -> np.ndarray:
     """Zero-mean, roughly unit-variance fractal value noise on a window of the global grid."""
-    rows = np.arange(row0, row0 + nrows)
-    cols = np.arange(col0, col0 + ncols)
     total = np.zeros((nrows, ncols))
     weights = [s / scales_m[0] for s in scales_m]
     for k, (s, w) in enumerate(zip(scales_m, weights, strict=True)):
         key = rng.stream_key(seed, f"science/{name}/octave{k}")
-        total += w * (
-            value_noise(key, rows=rows, cols=cols, resolution_m=resolution_m, scale_m=s) - 0.5
-        )
+        _octave(total, key, row0, col0, resolution_m / s, w)
     # Variance of a node value is 1/12; blending lowers it -- use the node variance as a
     # conservative unit (values stay within a few units).
     return total / np.sqrt(sum(w * w for w in weights) / 12.0)
 
 
+def _lattices(seed: int, names, *, window, resolution_m: float, scales_m):
+    """Node values of every octave of every field over ``window``: ``(nodes, origin,
+    step, weight)`` with ``nodes`` ``(fields, octaves, ny, nx)`` (padded), ``origin``
+    the lattice index of node ``[0, 0]`` per (field, octave), ``step`` = pixel / scale
+    and ``weight`` per octave (normalised by the noise's unit: see
+    :func:`fractal_noise`)."""
+    row0, col0, rows, cols = window
+    weights = np.array([s / scales_m[0] for s in scales_m])
+    steps = np.array([resolution_m / s for s in scales_m])
+    spans = []
+    for st in steps:
+        ny0, nx0 = math.floor((row0 + 0.5) * st), math.floor((col0 + 0.5) * st)
+        ny1 = math.floor((row0 + rows - 0.5) * st) + 2
+        nx1 = math.floor((col0 + cols - 0.5) * st) + 2
+        spans.append((ny0, nx0, ny1 - ny0, nx1 - nx0))
+    ny = max(sp[2] for sp in spans)
+    nx = max(sp[3] for sp in spans)
+    nodes = np.zeros((len(names), len(steps), ny, nx))
+    for f, name in enumerate(names):
+        for k, (ny0, nx0, n_y, n_x) in enumerate(spans):
+            key = rng.stream_key(seed, f"science/{name}/octave{k}")
+            ni, nj = np.meshgrid(np.arange(ny0, ny0 + n_y), np.arange(nx0, nx0 + n_x),
+                                 indexing="ij")  # fmt: skip
+            nodes[f, k, :n_y, :n_x] = rng.hash_uniform(key, ni, nj)
+    origin = np.array([[sp[0], sp[1]] for sp in spans], np.int64)
+    return nodes, origin, steps, weights / math.sqrt(float(np.sum(weights**2)) / 12.0)
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _fields(nodes, origin, steps, weights, row0, col0, out):  # pragma: no cover - numba
+    """``out[f, i, j]``: fractal value noise of field ``f`` at global cell ``(row0 + i,
+    col0 + j)`` (the sum of :func:`_add_octave` over the octaves)."""
+    n_f, n_o = nodes.shape[0], nodes.shape[1]
+    rows, cols = out.shape[1], out.shape[2]
+    fxs = np.empty((n_o, cols))
+    cxs = np.empty((n_o, cols), np.int64)
+    for o in range(n_o):
+        for j in range(cols):
+            x = (col0 + j + 0.5) * steps[o]
+            ix = math.floor(x)
+            tx = x - ix
+            fxs[o, j] = tx * tx * tx * (tx * (tx * 6.0 - 15.0) + 10.0)
+            cxs[o, j] = int(ix) - origin[o, 1]
+    for i in numba.prange(rows):
+        acc = np.zeros((n_f, cols))
+        for o in range(n_o):
+            y = (row0 + i + 0.5) * steps[o]
+            iy = math.floor(y)
+            ty = y - iy
+            fy = ty * ty * ty * (ty * (ty * 6.0 - 15.0) + 10.0)
+            ry = int(iy) - origin[o, 0]
+            w = weights[o]
+            for f in range(n_f):
+                for j in range(cols):
+                    fx = fxs[o, j]
+                    cx = cxs[o, j]
+                    top = nodes[f, o, ry, cx] * (1 - fx) + nodes[f, o, ry, cx + 1] * fx
+                    bottom = nodes[f, o, ry + 1, cx] * (1 - fx) + nodes[f, o, ry + 1, cx + 1] * fx
+                    acc[f, j] += w * (top * (1 - fy) + bottom * fy - 0.5)
+        for f in range(n_f):
+            for j in range(cols):
+                out[f, i, j] = acc[f, j]
+
+
+def mineral_fields(
+    seed: int, *, window, resolution_m: float, config: MineralConfig | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(h_minerals_ppm, minerals_wt_pct)`` on ``window = (row0, col0, nrows, ncols)``
+    in one pass (float32): :func:`h_minerals_ppm` and :func:`minerals_wt_pct`."""
+    cfg = config or MineralConfig()
+    names = ["h_minerals", *(f"mineral/{m}" for m in MINERALS)]
+    nodes, origin, steps, weights = _lattices(
+        seed, names, window=window, resolution_m=resolution_m, scales_m=cfg.scales_m
+    )
+    noise = np.empty((len(names), window[2], window[3]))
+    _fields(nodes, origin, steps, weights, int(window[0]), int(window[1]), noise)
+    h = np.empty((window[2], window[3]), np.float32)
+    out = np.empty((len(MINERALS), window[2], window[3]), np.float32)
+    _mix(noise, float(cfg.h_mean_ppm), float(cfg.h_amplitude),
+         np.asarray(cfg.abundances_wt_pct, np.float64), float(cfg.mineral_amplitude), h,
+         out)  # fmt: skip
+    return h, out
+
+
 def h_minerals_ppm(
     seed: int, *, window, resolution_m: float, config: MineralConfig | None = None
 ) -> np.ndarray:
-    """Hydrogen in hydrogen-bearing minerals (ppm) on ``window = (row0, col0, nrows,
-    ncols)``: ``h_mean_ppm exp(h_amplitude n - h_amplitude^2 / 2)``."""
-    cfg = config or MineralConfig()
-    n = fractal_noise(
-        seed,
-        "h_minerals",
-        row0=window[0],
-        col0=window[1],
-        nrows=window[2],
-        ncols=window[3],
-        resolution_m=resolution_m,
-        scales_m=cfg.scales_m,
-    )
-    a = cfg.h_amplitude
-    return cfg.h_mean_ppm * np.exp(a * n - 0.5 * a * a)
+    """Hydrogen in hydrogen-bearing minerals (ppm, float32) on ``window = (row0, col0,
+    nrows, ncols)``: ``h_mean_ppm exp(h_amplitude n - h_amplitude^2 / 2)``, ``n`` the
+    field's fractal noise."""
+    return mineral_fields(seed, window=window, resolution_m=resolution_m, config=config)[0]
 
 
 def minerals_wt_pct(
     seed: int, *, window, resolution_m: float, config: MineralConfig | None = None
 ) -> np.ndarray:
-    """``(len(MINERALS), nrows, ncols)`` wt%: each mineral's mean abundance times a
-    log-normal noise, renormalised to sum to 100."""
-    cfg = config or MineralConfig()
-    a = cfg.mineral_amplitude
-    bands = []
-    for name, mean in zip(MINERALS, cfg.abundances_wt_pct, strict=True):
-        n = fractal_noise(
-            seed,
-            f"mineral/{name}",
-            row0=window[0],
-            col0=window[1],
-            nrows=window[2],
-            ncols=window[3],
-            resolution_m=resolution_m,
-            scales_m=cfg.scales_m,
-        )
-        bands.append(mean * np.exp(a * n))
-    out = np.stack(bands)
-    return 100.0 * out / out.sum(axis=0)
+    """``(len(MINERALS), nrows, ncols)`` wt% (float32): each mineral's mean abundance
+    times a log-normal noise, renormalised to sum to 100."""
+    return mineral_fields(seed, window=window, resolution_m=resolution_m, config=config)[1]
 
 
-__all__ = ["fractal_noise", "h_minerals_ppm", "minerals_wt_pct", "value_noise"]
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _mix(noise, h_mean, h_amp, means, amplitude, h, out):  # pragma: no cover - numba
+    """Field 0 of ``noise`` -> hydrogen ``h`` (log-normal, mean ``h_mean``); fields 1..
+    -> ``out`` (each mineral's mean times a log-normal, renormalised to 100 wt%)."""
+    nb = out.shape[0]
+    rows, cols = out.shape[1], out.shape[2]
+    for i in numba.prange(rows):
+        v = np.empty(nb)
+        for j in range(cols):
+            h[i, j] = h_mean * math.exp(h_amp * noise[0, i, j] - 0.5 * h_amp * h_amp)
+            total = 0.0
+            for b in range(nb):
+                v[b] = means[b] * math.exp(amplitude * noise[b + 1, i, j])
+                total += v[b]
+            for b in range(nb):
+                out[b, i, j] = 100.0 * v[b] / total
+
+
+__all__ = [
+    "fractal_noise",
+    "h_minerals_ppm",
+    "mineral_fields",
+    "minerals_wt_pct",
+    "value_noise",
+]

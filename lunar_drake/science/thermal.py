@@ -3,14 +3,16 @@
 Grid conventions of :mod:`lunar_drake.terrain`: ``z[row, col]`` (m), row 0 north,
 column 0 west; x east, y north; azimuths clockwise from grid north.
 
-* :func:`illumination`: for each sector of the Sun's envelope
-  (:mod:`.sun_envelope`) one banded horizon computation
-  (:func:`lunar_drake.render.horizon.horizon_angles`, tile-invariant) gives each cell's
-  lit fraction at the sector's highest elevation (permanent shadow: never lit in any
-  sector) and at its elevation quantiles (time-mean flux); the absorbed direct flux is
-  ``(1 - A) S f cos(i)`` on the DEM's own slope.
-* :func:`view_factor`: the cosine-weighted share of each cell's sky that terrain fills,
-  ``mean over azimuths of sin^2(horizon)``.
+* :func:`illumination`: for each sector of the Sun's envelope (:mod:`.sun_envelope`)
+  one hull sweep (:mod:`.sweep`, tile-invariant) gives each cell's horizon along the
+  sector's azimuth, hence its lit fraction at the sector's highest elevation (permanent
+  shadow: never lit in any sector) and at its elevation quantiles (time-mean flux); the
+  absorbed direct flux is ``(1 - A) S f cos(i)`` on the DEM's own slope. One more sweep
+  gives the lit fraction and flux at the epoch.
+* :func:`view_factor`: the cosine-weighted share of each cell's sky that terrain fills
+  above its tangent plane, from horizons on coarse cells (:func:`sky_horizons`).
+* :func:`terrain_source`: the terrain's direct flux averaged around each coarse cell
+  (the source of the infrared and scattered light), upsampled bilinearly.
 * :func:`temperature`: radiative equilibrium with the terrain's infrared and scattered
   light and the geothermal flux (see :class:`~.config.ThermalConfig` for the
   approximation).
@@ -21,13 +23,16 @@ from __future__ import annotations
 import dataclasses as dc
 import math
 
+import numba
 import numpy as np
 from scipy import ndimage
 
-from lunar_drake.render.horizon import HorizonMask, horizon_angles
-from lunar_drake.render.lightmap import SUN_ANGULAR_RADIUS_DEG, lightmap_from_horizon
+from lunar_drake.errors import ConfigError
+from lunar_drake.render.horizon import HorizonMask, sweep_orientation
+from lunar_drake.render.lightmap import SUN_ANGULAR_RADIUS_DEG
 from lunar_drake.science.config import ThermalConfig
 from lunar_drake.science.sun_envelope import SunEnvelope
+from lunar_drake.science.sweep import EPOCH, SECTOR, Sweep, horizon_tangents, set_threads
 
 #: Stefan-Boltzmann constant (W m^-2 K^-4).
 SIGMA_SB = 5.670374419e-8
@@ -55,17 +60,34 @@ def cos_incidence(normals: np.ndarray, azimuth_deg: float, elevation_deg: float)
 
 @dc.dataclass(frozen=True)
 class Illumination:
-    """Direct sunlight over the envelope's span.
+    """Direct sunlight over the envelope's span and at the epoch (canonical arrays of
+    the DEM's shape).
 
     Attributes:
-        ever_lit: bool ``(rows, cols)``: some of the Sun's disk seen at some time.
-        q_max_w_m2: highest absorbed direct flux (W/m^2).
-        q_mean_w_m2: time-mean absorbed direct flux (W/m^2).
+        ever_lit: uint8: some of the Sun's disk seen at some time (1).
+        q_max_w_m2: highest absorbed direct flux (W/m^2, float32).
+        q_mean_w_m2: time-mean absorbed direct flux (W/m^2, float32).
+        q_now_w_m2: absorbed direct flux at the epoch (W/m^2, float32).
+        lit_now: visible fraction of the Sun's disk at the epoch (float32).
     """
 
     ever_lit: np.ndarray
     q_max_w_m2: np.ndarray
     q_mean_w_m2: np.ndarray
+    q_now_w_m2: np.ndarray
+    lit_now: np.ndarray
+
+
+def _mask_deg(mask: HorizonMask | None, azimuth_deg: float) -> float:
+    """The outside horizon (deg) along an azimuth; a 1-D mask only."""
+    if mask is None:
+        return 0.0
+    if not isinstance(mask, HorizonMask) or mask.gridded:
+        raise ConfigError(
+            f"horizon_mask = {mask!r} is invalid for the world model; a 1-D HorizonMask "
+            "(one profile for the site) or None (a level plain)"
+        )
+    return float(mask.elevation_deg(azimuth_deg))
 
 
 def illumination(
@@ -73,69 +95,235 @@ def illumination(
     *,
     resolution_m: float,
     envelope: SunEnvelope,
+    sun_azimuth_deg: float,
+    sun_elevation_deg: float,
+    sun_distance_au: float = 1.0,
     config: ThermalConfig | None = None,
     horizon_mask: HorizonMask | None = None,
-    horizon_resolution_deg: float = 0.1,
-    tile_px: int = 2048,
+    chunk: int = 512,
+    near: int = 3,
     workers: int = 2,
     progress=None,
 ) -> Illumination:
-    """Permanent shadow and direct fluxes of DEM ``z`` (see the module docstring).
+    """Permanent shadow and direct fluxes of DEM ``z`` (see the module docstring): one
+    hull sweep (:mod:`.sweep`) per sector of ``envelope`` and one at the epoch's Sun.
 
-    ``horizon_mask``: terrain outside the DEM (default a level plain, horizon 0 deg).
-    ``progress(done, total)`` is called after each sector.
+    ``horizon_mask``: terrain outside the DEM along each azimuth (a 1-D mask; default a
+    level plain, 0 deg). ``progress(done, total)`` is called after each sweep.
     """
     cfg = config or ThermalConfig()
-    mask = horizon_mask if horizon_mask is not None else HorizonMask.level(0.0)
-    z = np.asarray(z, np.float64)
-    normals = surface_normals(z, resolution_m)
+    z = np.asarray(z)
+    shape = z.shape
     r = SUN_ANGULAR_RADIUS_DEG
-    lit = np.zeros(z.shape, bool)
-    q_max = np.zeros(z.shape)
-    q_mean = np.zeros(z.shape)
-    low = mask.min_elevation_deg() - r
-    todo = [
-        b
-        for b in range(envelope.azimuth_deg.size)
-        if envelope.weight[b] > 0 and envelope.el_max_deg[b] + r > low
-    ]
-    for i, b in enumerate(todo):
+    lit = np.zeros(shape, np.uint8)
+    q_max = np.zeros(shape, np.float32)
+    q_mean = np.zeros(shape, np.float32)
+    q_now = np.zeros(shape, np.float32)
+    lit_now = np.zeros(shape, np.float32)
+    absorb = 1.0 - cfg.bond_albedo
+    jobs = []  # (azimuth, elevations, flux, mean weight per level, epoch?)
+    for b in range(envelope.azimuth_deg.size):
         az = float(envelope.azimuth_deg[b])
-        s = cfg.solar_constant_w_m2 / float(envelope.distance_au[b]) ** 2
-        el_max = float(envelope.el_max_deg[b])
+        if envelope.weight[b] <= 0 or envelope.el_max_deg[b] + r <= _mask_deg(horizon_mask, az):
+            continue
         levels = [float(e) for e in envelope.el_levels_deg[b]]
-        lo = max(min(levels) - r - 0.05, low - 0.05)
-        hi = el_max + r + 0.05
-        h = horizon_angles(
-            z,
-            azimuth_deg=az,
-            resolution_m=resolution_m,
-            elevation_range_deg=(lo, max(hi, lo + horizon_resolution_deg)),
-            resolution_deg=horizon_resolution_deg,
-            tile_px=tile_px,
-            workers=workers,
-        )
-
-        def absorbed(el: float, h=h, az=az, s=s) -> tuple[np.ndarray, np.ndarray]:
-            if el + r <= low:  # below every horizon
-                return np.zeros(z.shape), np.zeros(z.shape)
-            f = lightmap_from_horizon(
-                h,
-                sun_azimuth_deg=az,
-                sun_elevation_deg=el,
-                resolution_m=resolution_m,
-                horizon_mask=mask,
-            )
-            return (1.0 - cfg.bond_albedo) * s * f * cos_incidence(normals, az, el), f
-
-        q, f = absorbed(el_max)
-        lit |= f > 0.0
-        np.maximum(q_max, q, out=q_max)
-        mean = sum(absorbed(el)[0] for el in levels)
-        q_mean += envelope.weight[b] * mean / len(levels)
+        flux = absorb * cfg.solar_constant_w_m2 / float(envelope.distance_au[b]) ** 2
+        w = float(envelope.weight[b]) / len(levels)
+        jobs.append((az, [float(envelope.el_max_deg[b]), *levels], flux, w, False))
+    flux_now = absorb * cfg.solar_constant_w_m2 / float(sun_distance_au) ** 2
+    jobs.append((float(sun_azimuth_deg) % 360.0, [float(sun_elevation_deg)], flux_now, 0.0, True))
+    set_threads(workers)
+    # Sweeps sharing a canonical frame share one canonical copy of the DEM.
+    jobs.sort(key=lambda j: (sweep_orientation(j[0], shape).transpose,
+                             sweep_orientation(j[0], shape).flip))  # fmt: skip
+    zc, key = None, None
+    for i, (az, els, flux, w, epoch) in enumerate(jobs):
+        o = sweep_orientation(az, shape)
+        if (o.transpose, o.flip) != key:
+            key, zc = (o.transpose, o.flip), None
+            zc = np.ascontiguousarray(o.canon(z), dtype=np.float64)
+        sw = Sweep(z, azimuth_deg=az, resolution_m=resolution_m, chunk=chunk, near=near,
+                   canonical=zc)  # fmt: skip
+        par = sw.sun_par(flux_w_m2=flux, mask_deg=_mask_deg(horizon_mask, az),
+                         radius_deg=r, w_mean=w)  # fmt: skip
+        if epoch:
+            sw.run(EPOCH, par, els, o.canon(lit_now), o.canon(q_now), o.canon(lit))
+        else:
+            sw.run(SECTOR, par, els, o.canon(q_max), o.canon(q_mean), o.canon(lit))
         if progress is not None:
-            progress(i + 1, len(todo))
-    return Illumination(ever_lit=lit, q_max_w_m2=q_max, q_mean_w_m2=q_mean)
+            progress(i + 1, len(jobs))
+    return Illumination(lit, q_max, q_mean, q_now, lit_now)
+
+
+def coarse_factor(resolution_m: float, config: ThermalConfig | None = None) -> int:
+    """Pixels per side of the coarse cells of the view factor and the terrain's infrared
+    (``config.view_resolution_m``; at least 1)."""
+    cfg = config or ThermalConfig()
+    return max(1, round(cfg.view_resolution_m / resolution_m))
+
+
+def block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """Means over ``k x k`` blocks (the edge rows and columns repeated to fill the last
+    ones), float64."""
+    a = np.asarray(a)
+    if k == 1:
+        return a.astype(np.float64)
+    rows, cols = a.shape
+    out = np.empty((-(-rows // k), -(-cols // k)))
+    _block_mean(a, int(k), out)
+    return out
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _block_mean(a, k, out):  # pragma: no cover - numba
+    rows, cols = a.shape
+    for bi in numba.prange(out.shape[0]):
+        for bj in range(out.shape[1]):
+            total = 0.0
+            for i in range(bi * k, bi * k + k):
+                ii = min(i, rows - 1)
+                for j in range(bj * k, bj * k + k):
+                    total += a[ii, min(j, cols - 1)]
+            out[bi, bj] = total / (k * k)
+
+
+def upsample(coarse: np.ndarray, k: int, rows: range, ncols: int) -> np.ndarray:
+    """Bilinear values of ``coarse`` (cells of ``k x k`` pixels) at the centres of pixel
+    rows ``rows`` and columns ``0..ncols-1`` (edge values held beyond the outer
+    centres); each pixel's value depends only on its global position."""
+    out = np.empty((len(rows), ncols))
+    _bilinear_rows(np.asarray(coarse, np.float64), int(k), rows.start, out)
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _axis(i, k, n):  # pragma: no cover - numba
+    """Lower coarse index and weight of pixel index ``i`` (cells of ``k`` pixels)."""
+    u = min(max((i + 0.5) / k - 0.5, 0.0), n - 1.0)
+    i0 = min(math.floor(u), max(n - 2, 0))
+    return i0, min(i0 + 1, n - 1), u - i0
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _bilinear(coarse, k, r, c):  # pragma: no cover - numba
+    r0, r1, fr = _axis(r, k, coarse.shape[0])
+    c0, c1, fc = _axis(c, k, coarse.shape[1])
+    top = coarse[r0, c0] * (1.0 - fc) + coarse[r0, c1] * fc
+    bottom = coarse[r1, c0] * (1.0 - fc) + coarse[r1, c1] * fc
+    return top * (1.0 - fr) + bottom * fr
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _bilinear_rows(coarse, k, r0, out):  # pragma: no cover - numba
+    for i in numba.prange(out.shape[0]):
+        for c in range(out.shape[1]):
+            out[i, c] = _bilinear(coarse, k, r0 + i, c)
+
+
+def sky_horizons(
+    z: np.ndarray, *, resolution_m: float, config: ThermalConfig | None = None, workers: int = 2
+) -> np.ndarray:
+    """``sin^2`` of the horizon at ``config.view_azimuths`` azimuths on the DEM
+    block-averaged by :func:`coarse_factor` (``(n_az, rows_c, cols_c)``), the horizon
+    clipped to ``[0, view_max_deg]``."""
+    cfg = config or ThermalConfig()
+    k = coarse_factor(resolution_m, cfg)
+    zc = block_mean(z, k)
+    hi = math.radians(cfg.view_max_deg)
+    out = np.empty((cfg.view_azimuths, *zc.shape))
+    for j in range(cfg.view_azimuths):
+        t = horizon_tangents(zc, azimuth_deg=360.0 * j / cfg.view_azimuths,
+                             resolution_m=resolution_m * k, workers=workers)  # fmt: skip
+        out[j] = np.sin(np.clip(np.arctan(t), 0.0, hi)) ** 2
+    return out
+
+
+def view_factor_rows(z: np.ndarray, sin2_h: np.ndarray, *, resolution_m: float, k: int,
+                     rows: range) -> np.ndarray:  # fmt: skip
+    """The view factor (-) of pixel ``rows`` (see :func:`view_factor`) from the coarse
+    horizons ``sin2_h`` of :func:`sky_horizons`."""
+    out = np.empty((len(rows), z.shape[1]), np.float64)
+    sin_a, cos_a = _view_azimuths(sin2_h.shape[0])
+    _view_rows(np.asarray(z), sin2_h, sin_a, cos_a, float(resolution_m), int(k), rows.start, out)
+    return out
+
+
+def _view_azimuths(n: int) -> tuple[np.ndarray, np.ndarray]:
+    a = 2.0 * np.pi * np.arange(n) / n
+    return np.sin(a), np.cos(a)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _view_at(z, sin2_h, sin_a, cos_a, res, k, r, c):  # pragma: no cover - numba
+    """View factor of pixel ``(r, c)``: the coarse horizons above its tangent plane."""
+    nr, nc = z.shape
+    # dz/dx (east) and dz/dy (north) per metre, central (one-sided at the edges).
+    if nc == 1:
+        gx = 0.0
+    elif c == 0:
+        gx = (z[r, 1] - z[r, 0]) / res
+    elif c == nc - 1:
+        gx = (z[r, c] - z[r, c - 1]) / res
+    else:
+        gx = (z[r, c + 1] - z[r, c - 1]) / (2.0 * res)
+    if nr == 1:
+        gy = 0.0
+    elif r == 0:
+        gy = -(z[1, c] - z[0, c]) / res
+    elif r == nr - 1:
+        gy = -(z[r, c] - z[r - 1, c]) / res
+    else:
+        gy = -(z[r + 1, c] - z[r - 1, c]) / (2.0 * res)
+    f = 0.0
+    rc, cc = r // k, c // k
+    for j in range(sin_a.size):
+        tan_e = max(0.0, gx * sin_a[j] + gy * cos_a[j])
+        f += max(0.0, sin2_h[j, rc, cc] - tan_e * tan_e / (1.0 + tan_e * tan_e))
+    return f / sin_a.size
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _view_rows(z, sin2_h, sin_a, cos_a, res, k, r0, out):  # pragma: no cover - numba
+    for i in numba.prange(out.shape[0]):
+        for c in range(out.shape[1]):
+            out[i, c] = _view_at(z, sin2_h, sin_a, cos_a, res, k, r0 + i, c)
+
+
+def temperature_rows(z: np.ndarray, q_w_m2: np.ndarray, sources: np.ndarray, sin2_h: np.ndarray,
+                     *, resolution_m: float, rows: range,
+                     config: ThermalConfig | None = None) -> np.ndarray:  # fmt: skip
+    """Temperatures (K, float32 ``(n, len(rows), cols)``) of pixel ``rows`` of DEM ``z``
+    for ``n`` absorbed direct fluxes ``q_w_m2`` (``(n, len(rows), cols)``), with their
+    coarse terrain sources ``sources`` (``(n, rows_c, cols_c)``, :func:`terrain_source`)
+    and the coarse horizons ``sin2_h`` (:func:`sky_horizons`).
+
+    Radiative equilibrium ``eps sigma T^4 = q + Q_env + q_geo`` with the terrain's
+    infrared and scattered sunlight ``Q_env = F (eps M_ir + (1 - A) M_vis)``: ``F`` the
+    view factor (:func:`view_factor`), the terrain's emission at its direct-light
+    equilibrium ``M_ir = S + q_geo`` and its scattered light ``M_vis = A S / (1 - A)``,
+    ``S`` the source upsampled bilinearly (see :class:`~.config.ThermalConfig`)."""
+    cfg = config or ThermalConfig()
+    k = coarse_factor(resolution_m, cfg)
+    sin_a, cos_a = _view_azimuths(sin2_h.shape[0])
+    out = np.empty(np.shape(q_w_m2), np.float32)
+    consts = np.array([cfg.emissivity, cfg.bond_albedo, cfg.geothermal_w_m2, SIGMA_SB])
+    _temperature_rows(np.asarray(z), np.asarray(q_w_m2), np.asarray(sources, np.float64),
+                      sin2_h, sin_a, cos_a, float(resolution_m), int(k), rows.start, consts,
+                      out)  # fmt: skip
+    return out
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _temperature_rows(z, q, src, sin2_h, sin_a, cos_a, res, k, r0, consts, out):  # pragma: no cover
+    eps, a, q_geo, sigma = consts[0], consts[1], consts[2], consts[3]
+    for i in numba.prange(out.shape[1]):
+        r = r0 + i
+        for c in range(out.shape[2]):
+            view = _view_at(z, sin2_h, sin_a, cos_a, res, k, r, c)
+            for m in range(out.shape[0]):
+                s = _bilinear(src[m], k, r, c)
+                total = q[m, i, c] + view * ((eps + a) * s + eps * q_geo) + q_geo
+                out[m, i, c] = math.sqrt(math.sqrt(total / (eps * sigma)))
 
 
 def view_factor(
@@ -143,64 +331,29 @@ def view_factor(
     *,
     resolution_m: float,
     config: ThermalConfig | None = None,
-    tile_px: int = 2048,
     workers: int = 2,
 ) -> np.ndarray:
     """Cosine-weighted share of each cell's sky filled by terrain that rises above the
     cell's own tangent plane (-): ``mean_k (sin^2 h_k - sin^2 e_k)``, ``h_k`` the horizon
-    (from :func:`~lunar_drake.render.horizon.horizon_angles` on the DEM block-averaged to
-    about ``config.view_resolution_m``, resolved to ``config.view_max_deg``; the infrared
+    of the cell's coarse block (:func:`sky_horizons`: the DEM block-averaged to about
+    ``config.view_resolution_m``, resolved to ``config.view_max_deg``; the infrared
     environment is a large-scale effect) and ``e_k`` the tangent plane's elevation along
     azimuth ``k`` of ``config.view_azimuths`` (a uniform slope sees no terrain: 0)."""
     cfg = config or ThermalConfig()
     z = np.asarray(z, np.float64)
-    rows, cols = z.shape
-    k = max(1, round(cfg.view_resolution_m / resolution_m))
-    zc = z
-    if k > 1:
-        pr, pc = (-rows) % k, (-cols) % k
-        zp = np.pad(z, ((0, pr), (0, pc)), mode="edge")
-        zc = zp.reshape(zp.shape[0] // k, k, zp.shape[1] // k, k).mean(axis=(1, 3))
-    n = surface_normals(z, resolution_m)
-    f = np.zeros(z.shape)
-    for j in range(cfg.view_azimuths):
-        az = 360.0 * j / cfg.view_azimuths
-        h = horizon_angles(
-            zc,
-            azimuth_deg=az,
-            resolution_m=resolution_m * k,
-            elevation_range_deg=(0.0, cfg.view_max_deg),
-            resolution_deg=1.0,
-            tile_px=tile_px,
-            workers=workers,
-        )
-        h = np.repeat(np.repeat(h, k, axis=0), k, axis=1)[:rows, :cols]
-        a = math.radians(az)
-        tan_e = np.maximum(0.0, -(n[0] * math.sin(a) + n[1] * math.cos(a)) / n[2])
-        sin2_e = tan_e * tan_e / (1.0 + tan_e * tan_e)
-        f += np.maximum(0.0, np.sin(np.maximum(h.astype(np.float64), 0.0)) ** 2 - sin2_e)
-    return f / cfg.view_azimuths
+    sin2_h = sky_horizons(z, resolution_m=resolution_m, config=cfg, workers=workers)
+    k = coarse_factor(resolution_m, cfg)
+    return view_factor_rows(z, sin2_h, resolution_m=resolution_m, k=k, rows=range(z.shape[0]))
 
 
-def environment_flux(
-    q_abs_w_m2: np.ndarray,
-    *,
-    view: np.ndarray,
-    resolution_m: float,
-    config: ThermalConfig | None = None,
-) -> np.ndarray:
-    """Infrared and scattered sunlight absorbed from the surrounding terrain (W/m^2):
-    ``view (emissivity M_ir + (1 - A) M_vis)`` with the terrain's emission (at its
-    direct-light equilibrium) and scattered light averaged over a square of side
-    ``2 env_radius_m`` (see :class:`~.config.ThermalConfig`)."""
+def terrain_source(q_abs_w_m2: np.ndarray, *, resolution_m: float,
+                   config: ThermalConfig | None = None) -> np.ndarray:  # fmt: skip
+    """The terrain's absorbed direct flux averaged over a square of side ``2
+    env_radius_m`` (W/m^2), on the coarse cells of :func:`coarse_factor`."""
     cfg = config or ThermalConfig()
-    a, eps = cfg.bond_albedo, cfg.emissivity
-    emitted = q_abs_w_m2 + cfg.geothermal_w_m2  # eps sigma T^4 at direct equilibrium
-    scattered = a * q_abs_w_m2 / (1.0 - a)
-    size = 2 * max(1, round(cfg.env_radius_m / resolution_m)) + 1
-    m_ir = ndimage.uniform_filter(emitted, size=size, mode="nearest")
-    m_vis = ndimage.uniform_filter(scattered, size=size, mode="nearest")
-    return view * (eps * m_ir + (1.0 - a) * m_vis)
+    k = coarse_factor(resolution_m, cfg)
+    size = 2 * max(1, round(cfg.env_radius_m / (resolution_m * k))) + 1
+    return ndimage.uniform_filter(block_mean(q_abs_w_m2, k), size=size, mode="nearest")
 
 
 def equilibrium_temperature(q_w_m2, *, config: ThermalConfig | None = None) -> np.ndarray:
@@ -213,47 +366,62 @@ def equilibrium_temperature(q_w_m2, *, config: ThermalConfig | None = None) -> n
 def temperature(
     q_direct_w_m2: np.ndarray,
     *,
-    view: np.ndarray,
+    z: np.ndarray,
     resolution_m: float,
     config: ThermalConfig | None = None,
+    workers: int = 2,
 ) -> np.ndarray:
-    """Surface temperature (K) from the absorbed direct flux, with the terrain's infrared
-    and scattered light (:func:`environment_flux`) and the geothermal flux."""
-    q_env = environment_flux(q_direct_w_m2, view=view, resolution_m=resolution_m, config=config)
-    return equilibrium_temperature(q_direct_w_m2 + q_env, config=config)
+    """Surface temperature (K) of DEM ``z`` from the absorbed direct flux, with the
+    terrain's infrared and scattered light and the geothermal flux (see
+    :func:`temperature_rows`)."""
+    cfg = config or ThermalConfig()
+    q = np.asarray(q_direct_w_m2, np.float32)
+    sin2_h = sky_horizons(z, resolution_m=resolution_m, config=cfg, workers=workers)
+    src = terrain_source(q, resolution_m=resolution_m, config=cfg)
+    return temperature_rows(z, q[None], src[None], sin2_h, resolution_m=resolution_m,
+                            rows=range(q.shape[0]), config=cfg)[0]  # fmt: skip
 
 
 def direct_flux_at(z: np.ndarray, *, resolution_m: float, sun_azimuth_deg: float,
                    sun_elevation_deg: float, distance_au: float = 1.0,
                    config: ThermalConfig | None = None, horizon_mask: HorizonMask | None = None,
-                   tile_px: int = 2048, workers: int = 2,
-                   with_lit_fraction: bool = False):  # fmt: skip
-    """Absorbed direct sunlight (W/m^2) at one Sun position (lit fraction from
-    :func:`lunar_drake.render.lightmap.lightmap`); with ``with_lit_fraction``, also that
-    fraction."""
-    from lunar_drake.render.lightmap import lightmap
-
+                   workers: int = 2, with_lit_fraction: bool = False):  # fmt: skip
+    """Absorbed direct sunlight (W/m^2) at one Sun position (one hull sweep, as in
+    :func:`illumination`); with ``with_lit_fraction``, also the visible fraction of the
+    disk."""
     cfg = config or ThermalConfig()
     z = np.asarray(z, np.float64)
-    f = lightmap(z, sun_azimuth_deg=sun_azimuth_deg, sun_elevation_deg=sun_elevation_deg,
-                 resolution_m=resolution_m, horizon_mask=horizon_mask, tile_px=tile_px,
-                 workers=workers)  # fmt: skip
-    s = cfg.solar_constant_w_m2 / distance_au**2
-    cosi = cos_incidence(surface_normals(z, resolution_m), sun_azimuth_deg, sun_elevation_deg)
-    q = (1.0 - cfg.bond_albedo) * s * f * cosi
-    return (q, np.asarray(f)) if with_lit_fraction else q
+    q = np.zeros(z.shape, np.float32)
+    f = np.zeros(z.shape, np.float32)
+    sw = Sweep(z, azimuth_deg=sun_azimuth_deg, resolution_m=resolution_m)
+    par = sw.sun_par(
+        flux_w_m2=(1.0 - cfg.bond_albedo) * cfg.solar_constant_w_m2 / distance_au**2,
+        mask_deg=_mask_deg(horizon_mask, sun_azimuth_deg),
+        radius_deg=SUN_ANGULAR_RADIUS_DEG,
+    )
+    set_threads(workers)
+    o = sw.orient
+    sw.run(EPOCH, par, [float(sun_elevation_deg)], o.canon(f), o.canon(q),
+           np.zeros((1, 1), np.uint8))  # fmt: skip
+    return (q, f) if with_lit_fraction else q
 
 
 __all__ = [
     "SIGMA_SB",
     "Illumination",
+    "block_mean",
+    "coarse_factor",
     "cos_incidence",
     "direct_flux_at",
-    "environment_flux",
     "equilibrium_temperature",
     "illumination",
+    "sky_horizons",
     "sun_vector",
     "surface_normals",
     "temperature",
+    "temperature_rows",
+    "terrain_source",
+    "upsample",
     "view_factor",
+    "view_factor_rows",
 ]

@@ -7,6 +7,9 @@ The relations and their sources are documented on the config classes of
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -25,6 +28,17 @@ def label_patches(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, areas
 
 
+def frost_of_areas(areas_px: np.ndarray, *, resolution_m: float,
+                   config: FrostConfig | None = None) -> np.ndarray:  # fmt: skip
+    """Frost area fraction of each patch (-) from its area in cells (``areas_px[0]``: the
+    cells outside every patch, 0): ``max_area_frac (1 - exp(-A / area_scale_m2))``."""
+    cfg = config or FrostConfig()
+    area_m2 = np.asarray(areas_px, np.float64) * resolution_m**2
+    per_patch = cfg.max_area_frac * -np.expm1(-area_m2 / cfg.area_scale_m2)
+    per_patch[0] = 0.0
+    return per_patch
+
+
 def frost_area_fraction(
     psr: np.ndarray,
     t_max_k: np.ndarray,
@@ -38,17 +52,18 @@ def frost_area_fraction(
     cfg = config or FrostConfig()
     cold = np.asarray(psr, bool) & (np.asarray(t_max_k) < stable_k)
     labels, areas = label_patches(cold)
-    area_m2 = areas.astype(np.float64) * resolution_m**2
-    per_patch = cfg.max_area_frac * -np.expm1(-area_m2 / cfg.area_scale_m2)
-    per_patch[0] = 0.0
-    return per_patch[labels]
+    return frost_of_areas(areas, resolution_m=resolution_m, config=cfg)[labels]
 
 
 def oh_ppm(t_k: np.ndarray, *, config: OHConfig | None = None) -> np.ndarray:
     """Surface OH (ppm) at temperature ``t_k`` (K): a falling logistic."""
     cfg = config or OHConfig()
-    x = (np.asarray(t_k, np.float64) - cfg.half_K) / cfg.width_K
-    return cfg.min_ppm + (cfg.max_ppm - cfg.min_ppm) * 0.5 * (1.0 - np.tanh(0.5 * x))
+    return _oh(np.asarray(t_k, np.float64), cfg.min_ppm, cfg.max_ppm, cfg.half_K, cfg.width_K)
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+def _oh(t, lo, hi, half, width):  # pragma: no cover - numba
+    return lo + (hi - lo) * 0.5 * (1.0 - math.tanh(0.5 * (t - half) / width))
 
 
 def dry_layer_m(
@@ -57,14 +72,18 @@ def dry_layer_m(
     """Depth of the ice-free top layer (m): where the decaying temperature wave's maximum
     falls to ``stable_K`` (see :class:`~.config.IceConfig`), within ``[0, max_depth_m]``."""
     cfg = config or IceConfig()
-    t_max = np.asarray(t_max_k, np.float64)
-    t_mean = np.minimum(np.asarray(t_mean_k, np.float64), t_max)
-    out = np.full(t_max.shape, cfg.max_depth_m)
-    out[t_max <= cfg.stable_K] = 0.0
-    wave = (t_max > cfg.stable_K) & (t_mean < cfg.stable_K)
-    ratio = (t_max[wave] - t_mean[wave]) / (cfg.stable_K - t_mean[wave])
-    out[wave] = np.minimum(cfg.skin_depth_m * np.log(ratio), cfg.max_depth_m)
-    return out
+    return _dry(np.asarray(t_max_k, np.float64), np.asarray(t_mean_k, np.float64),
+                cfg.stable_K, cfg.skin_depth_m, cfg.max_depth_m)  # fmt: skip
+
+
+@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
+def _dry(t_max, t_mean, stable, skin, deepest):  # pragma: no cover - numba
+    if t_max <= stable:
+        return 0.0
+    t_mean = min(t_mean, t_max)
+    if t_mean >= stable:
+        return deepest
+    return min(skin * math.log((t_max - t_mean) / (stable - t_mean)), deepest)
 
 
 def rim_factor(
@@ -122,6 +141,7 @@ def ice_wt_pct(
 __all__ = [
     "dry_layer_m",
     "frost_area_fraction",
+    "frost_of_areas",
     "ice_wt_pct",
     "label_patches",
     "oh_ppm",

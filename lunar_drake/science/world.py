@@ -26,8 +26,10 @@ Sun's envelope, per-layer statistics, the configuration), written last: a direct
 with ``world.json`` is complete. Every layer is range-checked before it is written
 (:func:`check_layer`); each file is written under a temporary name and renamed.
 
-The computation is in memory (the horizons are tiled, bit-identical for any
-``tile_px``); out-of-core building of the paper's 30720^2 stack is not done yet.
+Layers are computed in blocks of ``tile_px`` rows and written window by window
+(:func:`stream_world`); the DEM, the sunlight accumulators and the temperature extremes
+are held whole (about 45 bytes per pixel). Every value is bit-identical for any
+``tile_px``. Out-of-core building of the paper's 30720^2 stack is not done yet.
 """
 
 from __future__ import annotations
@@ -74,21 +76,23 @@ def default_utc() -> str:
     return load_scenario(scenario_name="default").site.epoch_utc
 
 
-def check_layer(name: str, values: np.ndarray) -> None:
-    """Raises :class:`WorldModelError` naming the layer, its range and the allowed one
-    when ``values`` has NaN or leaves the layer's physical range."""
+def check_layer(name: str, values: np.ndarray) -> tuple[float, float]:
+    """``(min, max)`` of ``values``; raises :class:`WorldModelError` naming the layer, its
+    range and the allowed one when ``values`` has NaN or leaves the layer's physical
+    range."""
     if name not in LAYERS:
         raise WorldModelError(f"layer {name!r} is unknown; layers are {tuple(LAYERS)}")
     unit, (lo, hi), _ = LAYERS[name]
-    v = np.asarray(values, np.float64)
+    v = np.asarray(values)
     if v.size == 0:
         raise WorldModelError(f"layer {name!r} is empty")
-    vmin, vmax = float(np.min(v)), float(np.max(v))
+    vmin, vmax = float(np.min(v)), float(np.max(v))  # NaN propagates to both
     if not (math.isfinite(vmin) and math.isfinite(vmax)) or vmin < lo or vmax > hi:
         raise WorldModelError(
             f"layer {name!r} spans [{vmin:g}, {vmax:g}] {unit}, outside its physical range "
             f"[{lo:g}, {hi:g}]"
         )
+    return vmin, vmax
 
 
 @dc.dataclass(frozen=True)
@@ -156,9 +160,94 @@ class World:
     sun_elevation_deg: float
 
 
-def compute_world(
+#: Version of the layers' computation: part of the cache key (:func:`world_key`), so a
+#: cached world built by older code is rebuilt. 2: hull-sweep horizons (:mod:`.sweep`).
+MODEL_VERSION = 2
+
+#: Pixels per block of :func:`stream_world`.
+_BLOCK_PX = 1 << 22
+
+
+class ArraySink:
+    """Collects streamed layer blocks into whole arrays (:func:`compute_world`)."""
+
+    def __init__(self, shape) -> None:
+        self.shape = tuple(shape)
+        self.layers: dict = {}
+
+    def put(self, name: str, row0: int, block: np.ndarray) -> None:
+        check_layer(name, block)
+        if name not in self.layers:
+            lead = block.shape[:-2]
+            self.layers[name] = np.empty((*lead, *self.shape), block.dtype)
+        self.layers[name][..., row0 : row0 + block.shape[-2], :] = block
+
+
+class FileSink:
+    """Writes streamed layer blocks as GeoTIFFs (windowed, each under a temporary name
+    until complete), with per-layer statistics and decimated previews for the heat maps.
+
+    Use as a context manager; on an exception every unfinished file is discarded.
+    """
+
+    def __init__(self, out_dir, *, shape, transform, crs, max_px: int = 640) -> None:
+        self.out = Path(out_dir)
+        self.shape = tuple(shape)
+        self.transform, self.crs = transform, crs
+        self.step = max(1, math.ceil(max(self.shape) / max_px))
+        self.writers: dict = {}
+        self.stats: dict = {}
+        self.previews: dict = {}
+
+    def __enter__(self) -> FileSink:
+        return self
+
+    def put(self, name: str, row0: int, block: np.ndarray) -> None:
+        from lunar_drake.terrain.geotiff import GeoTiffWriter
+
+        vmin, vmax = check_layer(name, block)
+        if name not in self.writers:
+            bands = block.shape[0] if block.ndim == 3 else 1
+            w = GeoTiffWriter(self.out / f"{name}.tif", height=self.shape[0], width=self.shape[1],
+                              count=bands, dtype=block.dtype, transform=self.transform,
+                              crs=self.crs, descriptions=MINERALS if name == "minerals" else None,
+                              canonical=False, interleave="pixel")  # fmt: skip
+            # Rows written in order to a pixel-interleaved file land in canonical block
+            # order by themselves: the bytes do not depend on the block size.
+            self.writers[name] = w.__enter__()
+            self.stats[name] = [math.inf, -math.inf, 0.0, 0]
+            self.previews[name] = []
+        self.writers[name].write(block, row0=row0, col0=0)
+        st = self.stats[name]
+        st[0], st[1] = min(st[0], vmin), max(st[1], vmax)
+        st[2] += float(np.sum(block, dtype=np.float64))
+        st[3] += block.size
+        first = (-row0) % self.step
+        self.previews[name].append(np.array(block[..., first :: self.step, :: self.step]))
+
+    def preview(self, name: str) -> np.ndarray:
+        """The layer decimated by ``step`` (every band of ``minerals``)."""
+        return np.concatenate(self.previews[name], axis=-2)
+
+    def summary(self) -> dict:
+        return {n: {"unit": LAYERS[n][0], "min": st[0], "max": st[1], "mean": st[2] / st[3]}
+                for n, st in self.stats.items()}  # fmt: skip
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        err = None
+        for w in self.writers.values():
+            try:
+                w.__exit__(exc_type, exc, tb)
+            except Exception as e:  # keep closing the others; report the first
+                err = err or e
+        if err is not None and exc_type is None:
+            raise err
+
+
+def stream_world(
     z: np.ndarray,
     *,
+    sink,
     resolution_m: float,
     craters: Craters,
     seed: int,
@@ -169,16 +258,26 @@ def compute_world(
     config: WorldConfig | None = None,
     horizon_mask=None,
     progress=None,
-) -> dict:
-    """Every layer of DEM ``z`` (row 0 north, site origin at its centre) as arrays.
+) -> None:
+    """Computes every layer of DEM ``z`` (row 0 north, site origin at its centre) and
+    hands it to ``sink.put(name, row0, block)`` in blocks of ``config.tile_px`` rows
+    (range-checked by the sink). Whole-grid arrays held at once: the DEM, five sunlight
+    accumulators (float32), then the two temperature extremes and the shadow labels;
+    every other layer is computed and handed on block by block.
 
     ``progress(stage, fraction)`` is called as stages complete.
     """
     cfg = config or WorldConfig()
     cfg.validate()
-    z = np.asarray(z, np.float64)
+    z = np.asarray(z)
+    if not np.isfinite(z).all():
+        raise WorldModelError("the DEM has nodata cells; the world model needs a complete DEM")
     rows, cols = z.shape
     t = cfg.thermal
+    # Blocks of whole rows, at most tile_px of them and about 4 Mpx (their temporaries
+    # are float64 and several layers deep).
+    step = max(1, min(int(cfg.tile_px), _BLOCK_PX // cols))
+    blocks = [range(r0, min(rows, r0 + step)) for r0 in range(0, rows, step)]
 
     def report(stage, frac):
         if progress is not None:
@@ -188,73 +287,78 @@ def compute_world(
         z,
         resolution_m=resolution_m,
         envelope=envelope,
-        config=t,
-        horizon_mask=horizon_mask,
-        horizon_resolution_deg=cfg.sun.horizon_resolution_deg,
-        tile_px=cfg.tile_px,
-        workers=cfg.workers,
-        progress=lambda i, n: report("sun over a year", 0.6 * i / n),
-    )
-    view = thermal.view_factor(
-        z, resolution_m=resolution_m, config=t, tile_px=cfg.tile_px, workers=cfg.workers
-    )
-    report("view factors", 0.75)
-    q_now, lit_now = thermal.direct_flux_at(
-        z,
-        resolution_m=resolution_m,
         sun_azimuth_deg=sun_azimuth_deg,
         sun_elevation_deg=sun_elevation_deg,
-        distance_au=sun_distance_au,
+        sun_distance_au=sun_distance_au,
         config=t,
         horizon_mask=horizon_mask,
-        tile_px=cfg.tile_px,
+        chunk=min(int(cfg.tile_px), 64),
         workers=cfg.workers,
-        with_lit_fraction=True,
+        progress=lambda i, n: report("sun over a year", 0.7 * i / n),
     )
-    out = {"psr": (~illum.ever_lit).astype(np.uint8), "lit_fraction": lit_now}
-    out["t_max_K"] = thermal.temperature(
-        illum.q_max_w_m2, view=view, resolution_m=resolution_m, config=t
-    )
-    out["t_mean_K"] = np.minimum(
-        thermal.temperature(illum.q_mean_w_m2, view=view, resolution_m=resolution_m, config=t),
-        out["t_max_K"],
-    )
-    out["temperature_K"] = thermal.temperature(
-        q_now, view=view, resolution_m=resolution_m, config=t
-    )
+    k = thermal.coarse_factor(resolution_m, t)
+    sin2_h = thermal.sky_horizons(z, resolution_m=resolution_m, config=t, workers=cfg.workers)
+    sources = np.stack([
+        thermal.terrain_source(q, resolution_m=resolution_m, config=t)
+        for q in (illum.q_max_w_m2, illum.q_mean_w_m2, illum.q_now_w_m2)
+    ])  # fmt: skip
+    report("view factors", 0.75)
+    t_max = np.empty((rows, cols), np.float32)
+    t_mean = np.empty((rows, cols), np.float32)
+    for b in blocks:
+        sl = slice(b.start, b.stop)
+        sink.put("psr", b.start, (illum.ever_lit[sl] == 0).astype(np.uint8))
+        sink.put("lit_fraction", b.start, illum.lit_now[sl])
+        q = np.stack([illum.q_max_w_m2[sl], illum.q_mean_w_m2[sl], illum.q_now_w_m2[sl]])
+        temps = thermal.temperature_rows(z, q, sources, sin2_h, resolution_m=resolution_m,
+                                         rows=b, config=t)  # fmt: skip
+        t_max[sl] = temps[0]
+        t_mean[sl] = np.minimum(temps[1], temps[0])
+        t_now = temps[2]
+        sink.put("temperature_K", b.start, t_now)
+        sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh).astype(np.float32))
+    cold = (illum.ever_lit == 0) & (t_max < cfg.ice.stable_K)
+    del illum, sources
     report("temperatures", 0.85)
-    out["frost_area_frac"] = volatiles.frost_area_fraction(
-        out["psr"],
-        out["t_max_K"],
-        resolution_m=resolution_m,
-        config=cfg.frost,
-        stable_k=cfg.ice.stable_K,
-    )
-    out["oh_ppm"] = volatiles.oh_ppm(out["temperature_K"], config=cfg.oh)
-    out["dry_layer_m"] = volatiles.dry_layer_m(out["t_max_K"], out["t_mean_K"], config=cfg.ice)
+    labels, areas = volatiles.label_patches(cold)
+    del cold
+    per_patch = volatiles.frost_of_areas(areas, resolution_m=resolution_m, config=cfg.frost)
     rim = volatiles.rim_factor(
-        z.shape,
-        resolution_m=resolution_m,
+        (-(-rows // k), -(-cols // k)),
+        resolution_m=resolution_m * k,
         x0_m=-0.5 * cols * resolution_m,
         y1_m=0.5 * rows * resolution_m,
         craters=craters,
         config=cfg.ice,
     )
-    out["ice_wt_pct"] = volatiles.ice_wt_pct(out["dry_layer_m"], rim, config=cfg.ice)
-    report("volatiles", 0.95)
-    window = (0, 0, rows, cols)
-    out["h_minerals_ppm"] = mineral_layers.h_minerals_ppm(
-        seed, window=window, resolution_m=resolution_m, config=cfg.minerals
-    )
-    out["minerals"] = mineral_layers.minerals_wt_pct(
-        seed, window=window, resolution_m=resolution_m, config=cfg.minerals
-    )
-    for name, v in out.items():
-        if name != "psr":
-            out[name] = np.asarray(v, np.float32)
-        check_layer(name, out[name])
+    report("shadow patches and gardening", 0.87)
+    for b in blocks:
+        sl = slice(b.start, b.stop)
+        sink.put("t_max_K", b.start, t_max[sl])
+        sink.put("t_mean_K", b.start, t_mean[sl])
+        sink.put("frost_area_frac", b.start, per_patch[labels[sl]].astype(np.float32))
+        dry = volatiles.dry_layer_m(t_max[sl], t_mean[sl], config=cfg.ice)
+        sink.put("dry_layer_m", b.start, dry.astype(np.float32))
+        ice = volatiles.ice_wt_pct(dry, thermal.upsample(rim, k, b, cols), config=cfg.ice)
+        sink.put("ice_wt_pct", b.start, ice.astype(np.float32))
+        report("volatiles", 0.87 + 0.06 * b.stop / rows)
+    del labels, t_max, t_mean
+    for b in blocks:
+        h, minerals = mineral_layers.mineral_fields(
+            seed, window=(b.start, 0, len(b), cols), resolution_m=resolution_m,
+            config=cfg.minerals)  # fmt: skip
+        sink.put("h_minerals_ppm", b.start, h)
+        sink.put("minerals", b.start, minerals)
+        report("minerals", 0.93 + 0.07 * b.stop / rows)
     report("done", 1.0)
-    return out
+
+
+def compute_world(z: np.ndarray, **kwargs) -> dict:
+    """Every layer of DEM ``z`` as whole arrays, in :data:`LAYERS` order (the keyword
+    arguments of :func:`stream_world`, without ``sink``)."""
+    sink = ArraySink(np.shape(z))
+    stream_world(z, sink=sink, **kwargs)
+    return {n: sink.layers[n] for n in LAYERS}
 
 
 def _site_seed(site_dir: Path) -> int:
@@ -300,10 +404,9 @@ def build_world(
     utc = utc or default_utc()
     seed = _site_seed(site_dir) if seed is None else int(seed)
     t0 = time.perf_counter()
-    bar = _progress_bar(progress)
     hf = Heightfield.open(dem)
     try:
-        z = hf.read_window(0, 0, *hf.shape)
+        z = np.asarray(hf.read_window(0, 0, *hf.shape), np.float32)
         holes = int(np.count_nonzero(~np.isfinite(z)))
         if holes:
             raise WorldModelError(
@@ -314,44 +417,43 @@ def build_world(
         se = sun_earth_enu(utc=utc, site=site)
         az = (float(se.sun_azimuth_deg) + beta) % 360.0
         el = float(se.sun_elevation_deg)
-        layers = compute_world(
-            z,
-            resolution_m=hf.resolution_m,
-            craters=craters,
-            seed=seed,
-            envelope=env,
-            sun_azimuth_deg=az,
-            sun_elevation_deg=el,
-            sun_distance_au=float(se.sun_distance_km) / AU_KM,
-            config=cfg,
-            progress=bar,
-        )
         transform, crs, res = hf.transform, hf.crs, hf.resolution_m
     finally:
         hf.close()
-        if bar is not None:
-            bar(None, None)
-    world = World(
-        layers=layers,
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    clock = _StageClock(t0, _progress_bar(progress))
+    clock("read the DEM and the Sun's envelope", 0.0)
+    try:
+        with FileSink(out, shape=z.shape, transform=transform, crs=crs) as sink:
+            stream_world(
+                z,
+                sink=sink,
+                resolution_m=res,
+                craters=craters,
+                seed=seed,
+                envelope=env,
+                sun_azimuth_deg=az,
+                sun_elevation_deg=el,
+                sun_distance_au=float(se.sun_distance_km) / AU_KM,
+                config=cfg,
+                progress=clock,
+            )
+    finally:
+        clock(None, None)  # closes the bar; the clock goes on
+    return _finish_world(
+        out,
+        sink,
+        z=z,
         resolution_m=res,
-        transform=transform,
-        crs=crs,
         utc=utc,
         envelope=env,
         sun_azimuth_deg=az,
         sun_elevation_deg=el,
-    )
-    return write_world(
-        world,
-        out_dir=out_dir,
-        z=z,
         config=cfg,
         png=png,
-        extra={
-            "site_dir": str(site_dir),
-            "seed": seed,
-            "seconds": round(time.perf_counter() - t0, 2),
-        },
+        extra={"site_dir": str(site_dir), "seed": seed},
+        clock=clock,
     )
 
 
@@ -364,59 +466,83 @@ def write_world(
     png: bool = True,
     extra: dict | None = None,
 ) -> dict:
-    """Writes every layer's GeoTIFF (and heat map), then ``world.json``; returns it."""
-    from lunar_drake.files import atomic_write_text
-    from lunar_drake.terrain.geotiff import write_geotiff
-
+    """Writes every layer's GeoTIFF (and heat map) of an in-memory world, then
+    ``world.json``; returns it."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    stats = {}
-    for name, arr in world.layers.items():
-        path = out / f"{name}.tif"
-        if name == "minerals":
-            write_named_bands(path, arr, names=MINERALS, transform=world.transform, crs=world.crs)
-        else:
-            write_geotiff(path, arr, transform=world.transform, crs=world.crs)
-        a = np.asarray(arr, np.float64)
-        stats[name] = {
-            "unit": LAYERS[name][0],
-            "min": float(a.min()),
-            "max": float(a.max()),
-            "mean": float(a.mean()),
-        }
-        if png:
-            heat_map(out / f"{name}.png", arr, name=name, resolution_m=world.resolution_m, z=z)
+    shape = np.shape(world.layers["psr"])
+    with FileSink(out, shape=shape, transform=world.transform, crs=world.crs) as sink:
+        for name, arr in world.layers.items():
+            sink.put(name, 0, np.asarray(arr))
+    return _finish_world(out, sink, z=z, resolution_m=world.resolution_m, utc=world.utc,
+                         envelope=world.envelope, sun_azimuth_deg=world.sun_azimuth_deg,
+                         sun_elevation_deg=world.sun_elevation_deg, config=config, png=png,
+                         extra=extra)  # fmt: skip
+
+
+def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
+                  sun_azimuth_deg, sun_elevation_deg, config, png, extra,
+                  clock=None) -> dict:  # fmt: skip
+    """Heat maps from the sink's previews, then ``world.json`` (last; with the build's
+    ``seconds`` and ``stage_seconds`` when a :class:`_StageClock` is given)."""
+    from lunar_drake.files import atomic_write_text
+
+    step = sink.step
+    zp = None if z is None else np.asarray(z)[::step, ::step]
     if png:
-        overview(
-            out / "world.png",
-            world.layers,
-            resolution_m=world.resolution_m,
-            z=z,
-            title=f"World model at {world.utc}",
-        )
-    env = world.envelope
+        previews = {n: sink.preview(n) for n in sink.writers}
+        for name, arr in previews.items():
+            heat_map(out / f"{name}.png", arr, name=name, resolution_m=resolution_m * step, z=zp)
+        overview(out / "world.png", previews, resolution_m=resolution_m * step, z=zp,
+                 title=f"World model at {utc}")  # fmt: skip
+    stats = sink.summary()
     summary = {
-        "utc": world.utc,
-        "resolution_m": world.resolution_m,
-        "shape": list(np.shape(world.layers["psr"])),
-        "sun_at_epoch": {
-            "azimuth_deg": world.sun_azimuth_deg,
-            "elevation_deg": world.sun_elevation_deg,
-        },
+        "utc": utc,
+        "resolution_m": resolution_m,
+        "shape": list(sink.shape),
+        "sun_at_epoch": {"azimuth_deg": sun_azimuth_deg, "elevation_deg": sun_elevation_deg},
         "sun_envelope": {
-            "samples": env.samples,
-            "azimuth_bins": int(env.azimuth_deg.size),
-            "max_elevation_deg": env.max_elevation_deg,
-            "el_max_deg": [round(float(v), 4) for v in env.el_max_deg],
+            "samples": envelope.samples,
+            "azimuth_bins": int(envelope.azimuth_deg.size),
+            "max_elevation_deg": envelope.max_elevation_deg,
+            "el_max_deg": [round(float(v), 4) for v in envelope.el_max_deg],
         },
-        "psr_fraction": float(np.mean(world.layers["psr"])),
+        "psr_fraction": stats["psr"]["mean"],
         "layers": stats,
         "minerals": list(MINERALS),
         "config": dc.asdict(config or WorldConfig()),
         **(extra or {}),
     }
+    if clock is not None:
+        clock("heat maps", 1.0)
+        summary["seconds"] = round(clock.total_s, 2)
+        summary["stage_seconds"] = {k: round(v, 2) for k, v in clock.stages.items()}
     atomic_write_text(out / "world.json", json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+class _StageClock:
+    """A ``progress(stage, fraction)`` callback that times the stages (a report closes
+    the work since the previous one, which is charged to the report's stage) and
+    forwards to ``bar``; ``stage = None`` closes the bar."""
+
+    def __init__(self, t0: float, bar=None) -> None:
+        self.t0, self.last, self.bar = t0, t0, bar
+        self.stages: dict = {}
+
+    def __call__(self, stage, fraction) -> None:
+        now = time.perf_counter()
+        if stage is not None:
+            self.stages[stage] = self.stages.get(stage, 0.0) + now - self.last
+            self.last = now
+        if self.bar is not None:
+            self.bar(stage, fraction)
+            if stage is None:
+                self.bar = None
+
+    @property
+    def total_s(self) -> float:
+        return time.perf_counter() - self.t0
 
 
 def write_named_bands(path, arr, *, names, transform, crs, nodata=None) -> None:
@@ -436,8 +562,8 @@ def write_named_bands(path, arr, *, names, transform, crs, nodata=None) -> None:
 
 def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
     """Cache key of a site's world model: its ``site.json`` (what determines the site's
-    bytes), the epoch and the configuration (tile size and workers excluded: they never
-    change a byte)."""
+    bytes), the epoch, the configuration (tile size and workers excluded: they never
+    change a byte) and :data:`MODEL_VERSION`."""
     import hashlib
 
     site_dir = Path(site_dir)
@@ -451,8 +577,10 @@ def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
     cfg = dc.asdict(config)
     cfg.pop("tile_px"), cfg.pop("workers")
     text = json.dumps(
-        {"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS)}, sort_keys=True
-    )
+        {"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS),
+         "model": MODEL_VERSION},
+        sort_keys=True,
+    )  # fmt: skip
     return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
 
@@ -548,22 +676,29 @@ def heat_map(path, arr, *, name: str, resolution_m: float, z=None, max_px: int =
     unit, _, cmap = LAYERS[name]
     fig = Figure(figsize=(7.5, 6.2), dpi=110)
     ax = fig.add_subplot(1, 1, 1)
-    if z is not None:
-        ax.imshow(
-            hillshade(np.asarray(z, np.float64)[::step, ::step], resolution_m * step),
-            cmap="gray",
-            extent=ext,
-            vmin=0,
-            vmax=1,
-        )
-    alpha = 0.75 if z is not None else 1.0
-    im = ax.imshow(a, cmap=cmap, extent=ext, alpha=alpha, interpolation="nearest")
-    fig.colorbar(im, ax=ax, label=unit, shrink=0.85)
+    rgb, mappable = _blend(a, None if z is None else np.asarray(z)[::step, ::step],
+                           resolution_m * step, cmap)  # fmt: skip
+    ax.imshow(rgb, extent=ext, interpolation="nearest")
+    fig.colorbar(mappable, ax=ax, label=unit, shrink=0.85)
     ax.set_xlabel("x (m, east)")
     ax.set_ylabel("y (m, north)")
     ax.set_title(title)
     with atomic_path(path, what="figure") as tmp:
-        fig.savefig(tmp, format="png")
+        fig.savefig(tmp, format="png", pil_kwargs={"compress_level": 3})
+
+
+def _blend(a: np.ndarray, z, res: float, cmap: str):
+    """``(rgb, mappable)``: layer ``a`` coloured by ``cmap``, laid at 75 % over the
+    hillshade of ``z`` (pixel ``res`` m) when given; one image, drawn once."""
+    import matplotlib as mpl
+
+    norm = mpl.colors.Normalize(float(np.nanmin(a)), float(np.nanmax(a)))
+    mappable = mpl.cm.ScalarMappable(norm=norm, cmap=cmap)
+    rgb = mappable.to_rgba(a)[..., :3]
+    if z is not None:
+        shade = hillshade(np.asarray(z, np.float64), res)[..., None]
+        rgb = 0.75 * rgb + 0.25 * shade
+    return np.clip(rgb, 0.0, 1.0), mappable
 
 
 #: The panels of ``world.png``.
@@ -587,13 +722,10 @@ def overview(
         half_x, half_y = 0.5 * cols * step * resolution_m, 0.5 * rows * step * resolution_m
         ext = [-half_x, half_x, -half_y, half_y]
         ax = fig.add_subplot(2, 3, k + 1)
-        if z is not None:
-            zz = np.asarray(z, np.float64)[::step, ::step]
-            ax.imshow(hillshade(zz, resolution_m * step), cmap="gray", extent=ext, vmin=0, vmax=1)
         unit, _, cmap = LAYERS[name]
-        im = ax.imshow(
-            a, cmap=cmap, extent=ext, alpha=0.75 if z is not None else 1.0, interpolation="nearest"
-        )
+        zz = None if z is None else np.asarray(z)[::step, ::step]
+        rgb, im = _blend(a, zz, resolution_m * step, cmap)
+        ax.imshow(rgb, extent=ext, interpolation="nearest")
         fig.colorbar(im, ax=ax, label=unit, shrink=0.8)
         ax.set_title(name)
         ax.tick_params(labelsize=7)
@@ -601,7 +733,7 @@ def overview(
         fig.suptitle(title)
     fig.tight_layout()
     with atomic_path(path, what="figure") as tmp:
-        fig.savefig(tmp, format="png")
+        fig.savefig(tmp, format="png", pil_kwargs={"compress_level": 3})
 
 
 def hillshade(z: np.ndarray, res: float, az_deg: float = 315.0, el_deg: float = 35.0):
@@ -632,8 +764,11 @@ def _progress_bar(enabled: bool):
 
 __all__ = [
     "LAYERS",
+    "MODEL_VERSION",
     "WORLD_FILES",
+    "ArraySink",
     "Craters",
+    "FileSink",
     "World",
     "WorldModelError",
     "build_world",
@@ -647,6 +782,7 @@ __all__ = [
     "overview",
     "read_craters",
     "read_world_layer",
+    "stream_world",
     "surface_map",
     "world_key",
     "write_named_bands",

@@ -123,7 +123,18 @@ _CREATION_KEYS = ("tiled", "blockxsize", "blockysize", "interleave", "BIGTIFF", 
 
 
 def _creation_profile(
-    *, height, width, count, dtype, transform, crs, nodata, blocksize, compress, path
+    *,
+    height,
+    width,
+    count,
+    dtype,
+    transform,
+    crs,
+    nodata,
+    blocksize,
+    compress,
+    path,
+    interleave: str = "band",
 ) -> dict:
     if int(height) < 1 or int(width) < 1 or int(count) < 1:
         raise OutOfRangeError(
@@ -155,7 +166,7 @@ def _creation_profile(
         tiled=True,
         blockxsize=bs,
         blockysize=bs,
-        interleave="band",
+        interleave=interleave,
         BIGTIFF="IF_SAFER",
     )
     if nodata is not None:
@@ -232,6 +243,11 @@ class GeoTiffWriter:
         transform: pixel -> map affine (m). crs: projected CRS in metres.
         nodata: nodata value for the header. blocksize: tile size (px, multiple of 16).
         compress: None or one of :data:`COMPRESSIONS`.
+        descriptions: one name per band (GDAL band descriptions), or None.
+        canonical: rewrite the file in canonical block order on close (needed when
+            windows come from several threads); a single writer of rows in order, to a
+            one-band or pixel-interleaved file, may skip it (``False``).
+        interleave: ``"band"`` (default) or ``"pixel"`` (every tile holds all bands).
     """
 
     def __init__(
@@ -247,8 +263,18 @@ class GeoTiffWriter:
         nodata=None,
         blocksize: int = 256,
         compress: str | None = None,
+        descriptions: tuple[str, ...] | None = None,
+        canonical: bool = True,
+        interleave: str = "band",
     ) -> None:
         self.path = os.fspath(path)
+        self._canonical = bool(canonical)
+        if descriptions is not None and len(descriptions) != int(count):
+            raise ConfigError(
+                f"descriptions {descriptions!r} for '{self.path}' must name each of its "
+                f"{count} bands"
+            )
+        self._descriptions = tuple(descriptions) if descriptions is not None else None
         self._profile = _creation_profile(
             height=height,
             width=width,
@@ -260,6 +286,7 @@ class GeoTiffWriter:
             blocksize=blocksize,
             compress=compress,
             path=self.path,
+            interleave=interleave,
         )
         self.height = int(height)
         self.width = int(width)
@@ -288,6 +315,8 @@ class GeoTiffWriter:
         self._tmp = _temp_name(self.path)
         try:
             self._ds = _create(self._tmp, self.path, self._profile)
+            for k, name in enumerate(self._descriptions or (), start=1):
+                self._ds.set_band_description(k, name)
         except BaseException:
             _remove_quietly(self._tmp)
             self._tmp = None
@@ -311,6 +340,9 @@ class GeoTiffWriter:
         canon = None
         try:
             ds.close()
+            if not self._canonical:
+                _commit(tmp, self.path)
+                return
             # Windows written from several threads land in the file in completion order;
             # a sequential GDAL copy puts the blocks in canonical order, so the file's
             # bytes depend only on its pixels (not on tiling or workers).
