@@ -204,6 +204,18 @@ def test_written_files_do_not_depend_on_the_block_size(tmp_path):
     assert digests[0] == digests[1] == digests[2]
 
 
+def test_an_empty_or_incomplete_dem_is_refused():
+    _z, _r, env, craters = _bowl_site()
+    args = dict(resolution_m=RES, craters=craters, seed=3, envelope=env, sun_azimuth_deg=0.0,
+                sun_elevation_deg=3.0)  # fmt: skip
+    with pytest.raises(WorldModelError, match=r"shape \(0, 5\)"):
+        compute_world(np.zeros((0, 5)), **args)
+    holey = np.zeros((8, 8))
+    holey[3, 4] = np.nan
+    with pytest.raises(WorldModelError, match="nodata"):
+        compute_world(holey, **args)
+
+
 def test_minerals_are_tile_invariant_and_sum_to_100():
     from lunar_drake.science.minerals import h_minerals_ppm, minerals_wt_pct
 
@@ -368,3 +380,34 @@ def test_world_build_bad_sites_and_outputs(small_site, tmp_path, capsys):
     assert main(["world", "build", str(src), "--out", str(mine), "--no-progress"]) == 2
     assert "notes.txt" in capsys.readouterr().err
     assert (mine / "notes.txt").read_text() == "keep me"
+
+
+def test_fractal_noise_is_the_blend_of_hashed_lattice_nodes():
+    # Recomputed point by point from rng.hash_uniform, independently of the kernel.
+    from lunar_drake import rng
+    from lunar_drake.science.minerals import fractal_noise
+
+    scales, res = [50.0, 12.0, 3.0], 0.5
+    n = fractal_noise(5, "x", row0=10, col0=30, nrows=20, ncols=20, resolution_m=res,
+                      scales_m=scales)  # fmt: skip
+    weights = [s / scales[0] for s in scales]
+
+    def fade(t):
+        return t * t * t * (t * (t * 6 - 15) + 10)
+
+    for r, c in ((10, 30), (17, 41), (29, 49)):
+        total = 0.0
+        for k, (s, w) in enumerate(zip(scales, weights, strict=True)):
+            key = rng.stream_key(5, f"science/x/octave{k}")
+            y, x = (r + 0.5) * res / s, (c + 0.5) * res / s
+            iy, ix = math.floor(y), math.floor(x)
+            fy, fx = fade(y - iy), fade(x - ix)
+
+            def v(i, j, key=key):
+                return float(rng.hash_uniform(key, np.array([i]), np.array([j]))[0])
+
+            top = v(iy, ix) * (1 - fx) + v(iy, ix + 1) * fx
+            bottom = v(iy + 1, ix) * (1 - fx) + v(iy + 1, ix + 1) * fx
+            total += w * (top * (1 - fy) + bottom * fy - 0.5)
+        total /= math.sqrt(sum(w * w for w in weights) / 12.0)
+        assert n[r - 10, c - 30] == pytest.approx(total, abs=1e-12)

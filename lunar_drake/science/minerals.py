@@ -20,54 +20,6 @@ from lunar_drake import rng
 from lunar_drake.science.config import MINERALS, MineralConfig
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _add_octave(total, nodes, ny0, nx0, row0, col0, step, weight):  # pragma: no cover
-    """``total += weight (value noise - 0.5)`` on the window at ``(row0, col0)``: lattice
-    coordinates ``(index + 0.5) step`` (``step`` = pixel / scale), node values ``nodes``
-    from lattice node ``(ny0, nx0)``, blended with the quintic fade."""
-    rows, cols = total.shape
-    fxs = np.empty(cols)
-    cxs = np.empty(cols, np.int64)
-    for j in range(cols):
-        x = (col0 + j + 0.5) * step
-        ix = math.floor(x)
-        tx = x - ix
-        fxs[j] = tx * tx * tx * (tx * (tx * 6.0 - 15.0) + 10.0)
-        cxs[j] = int(ix) - nx0
-    for i in numba.prange(rows):
-        y = (row0 + i + 0.5) * step
-        iy = math.floor(y)
-        ty = y - iy
-        fy = ty * ty * ty * (ty * (ty * 6.0 - 15.0) + 10.0)
-        ry = int(iy) - ny0
-        for j in range(cols):
-            fx = fxs[j]
-            cx = cxs[j]
-            top = nodes[ry, cx] * (1 - fx) + nodes[ry, cx + 1] * fx
-            bottom = nodes[ry + 1, cx] * (1 - fx) + nodes[ry + 1, cx + 1] * fx
-            total[i, j] += weight * (top * (1 - fy) + bottom * fy - 0.5)
-
-
-def value_noise(key: int, *, rows, cols, resolution_m: float, scale_m: float) -> np.ndarray:
-    """Value noise in [0, 1) at global cells ``rows`` x ``cols`` (contiguous 1-D integer
-    ranges) for lattice spacing ``scale_m``."""
-    rows, cols = np.asarray(rows), np.asarray(cols)
-    total = np.full((rows.size, cols.size), 0.5)
-    _octave(total, key, int(rows[0]), int(cols[0]), resolution_m / scale_m, 1.0)
-    return total
-
-
-def _octave(total, key: int, row0: int, col0: int, step: float, weight: float) -> None:
-    rows, cols = total.shape
-    ny0 = math.floor((row0 + 0.5) * step)
-    nx0 = math.floor((col0 + 0.5) * step)
-    ny1 = math.floor((row0 + rows - 0.5) * step) + 1
-    nx1 = math.floor((col0 + cols - 0.5) * step) + 1
-    ni, nj = np.meshgrid(np.arange(ny0, ny1 + 1), np.arange(nx0, nx1 + 1), indexing="ij")
-    nodes = rng.hash_uniform(key, ni, nj)
-    _add_octave(total, nodes, ny0, nx0, row0, col0, step, weight)
-
-
 def fractal_noise(
     seed: int,
     name: str,
@@ -79,15 +31,15 @@ def fractal_noise(
     resolution_m: float,
     scales_m,
 ) -> np.ndarray:
-    """Zero-mean, roughly unit-variance fractal value noise on a window of the global grid."""
-    total = np.zeros((nrows, ncols))
-    weights = [s / scales_m[0] for s in scales_m]
-    for k, (s, w) in enumerate(zip(scales_m, weights, strict=True)):
-        key = rng.stream_key(seed, f"science/{name}/octave{k}")
-        _octave(total, key, row0, col0, resolution_m / s, w)
-    # Variance of a node value is 1/12; blending lowers it -- use the node variance as a
-    # conservative unit (values stay within a few units).
-    return total / np.sqrt(sum(w * w for w in weights) / 12.0)
+    """Zero-mean, roughly unit-variance fractal value noise of field ``name`` on a
+    window of the global grid (one field of :func:`mineral_fields`)."""
+    nodes, origin, steps, weights = _lattices(
+        seed, [name], window=(row0, col0, nrows, ncols), resolution_m=resolution_m,
+        scales_m=scales_m,
+    )  # fmt: skip
+    out = np.empty((1, nrows, ncols))
+    _fields(nodes, origin, steps, weights, int(row0), int(col0), out)
+    return out[0]
 
 
 def _lattices(seed: int, names, *, window, resolution_m: float, scales_m):
@@ -121,7 +73,8 @@ def _lattices(seed: int, names, *, window, resolution_m: float, scales_m):
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _fields(nodes, origin, steps, weights, row0, col0, out):  # pragma: no cover - numba
     """``out[f, i, j]``: fractal value noise of field ``f`` at global cell ``(row0 + i,
-    col0 + j)`` (the sum of :func:`_add_octave` over the octaves)."""
+    col0 + j)``: per octave, the node values around the cell blended with the quintic
+    fade, less 0.5, times the octave's weight, summed."""
     n_f, n_o = nodes.shape[0], nodes.shape[1]
     rows, cols = out.shape[1], out.shape[2]
     fxs = np.empty((n_o, cols))
@@ -214,5 +167,4 @@ __all__ = [
     "h_minerals_ppm",
     "mineral_fields",
     "minerals_wt_pct",
-    "value_noise",
 ]

@@ -52,12 +52,6 @@ def sun_vector(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
     return np.array([math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
 
 
-def cos_incidence(normals: np.ndarray, azimuth_deg: float, elevation_deg: float) -> np.ndarray:
-    """``max(0, n . s)``: cosine of the Sun's incidence on each cell's slope."""
-    s = sun_vector(azimuth_deg, elevation_deg)
-    return np.maximum(0.0, np.tensordot(s, normals, axes=1))
-
-
 @dc.dataclass(frozen=True)
 class Illumination:
     """Direct sunlight over the envelope's span and at the epoch (canonical arrays of
@@ -411,7 +405,6 @@ __all__ = [
     "Illumination",
     "block_mean",
     "coarse_factor",
-    "cos_incidence",
     "direct_flux_at",
     "equilibrium_temperature",
     "illumination",

@@ -270,6 +270,8 @@ def stream_world(
     cfg = config or WorldConfig()
     cfg.validate()
     z = np.asarray(z)
+    if z.ndim != 2 or z.size == 0:
+        raise WorldModelError(f"the DEM has shape {z.shape}; a non-empty 2-D grid is needed")
     if not np.isfinite(z).all():
         raise WorldModelError("the DEM has nodata cells; the world model needs a complete DEM")
     rows, cols = z.shape
