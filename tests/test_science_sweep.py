@@ -107,3 +107,15 @@ def test_chunking_never_changes_a_byte():
         a = horizon_tangents(z, azimuth_deg=az, resolution_m=RES, chunk=7, workers=1)
         b = horizon_tangents(z, azimuth_deg=az, resolution_m=RES, chunk=4096, workers=2)
         assert a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("azimuth", [10.0, 60.0, 150.0, 250.0])
+def test_the_canonical_dem_is_the_turned_grid(azimuth):
+    from lunar_drake.render.horizon import sweep_orientation
+    from lunar_drake.science.sweep import canonical_dem
+
+    z = np.random.default_rng(4).normal(size=(70, 131)).astype(np.float32)
+    o = sweep_orientation(azimuth, z.shape)
+    zc = canonical_dem(z, o)
+    assert zc.dtype == np.float64 and zc.flags.c_contiguous
+    assert np.array_equal(zc, o.canon(z).astype(np.float64))

@@ -204,6 +204,34 @@ def test_written_files_do_not_depend_on_the_block_size(tmp_path):
     assert digests[0] == digests[1] == digests[2]
 
 
+def test_a_failed_background_write_discards_every_file(tmp_path, monkeypatch):
+    from affine import Affine
+
+    from lunar_drake.science.world import FileSink
+    from lunar_drake.terrain import geotiff
+    from lunar_drake.terrain.crs import moon_south_polar_stereographic
+
+    temp = np.full((40, 30), 120.0, np.float32)
+    calls = {"n": 0}
+    real = geotiff.GeoTiffWriter.write
+
+    def flaky(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError("disk full")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(geotiff.GeoTiffWriter, "write", flaky)
+    transform = Affine(0.5, 0, 73000.0, 0, -0.5, 118000.0)
+    with pytest.raises(OSError, match="disk full"):
+        with FileSink(tmp_path, shape=temp.shape, transform=transform,
+                      crs=moon_south_polar_stereographic()) as sink:  # fmt: skip
+            for r0 in range(0, 40, 10):
+                sink.put("temperature_K", r0, temp[r0 : r0 + 10])
+                sink.put("t_max_K", r0, temp[r0 : r0 + 10])
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_an_empty_or_incomplete_dem_is_refused():
     _z, _r, env, craters = _bowl_site()
     args = dict(resolution_m=RES, craters=craters, seed=3, envelope=env, sun_azimuth_deg=0.0,
@@ -411,3 +439,28 @@ def test_fractal_noise_is_the_blend_of_hashed_lattice_nodes():
             total += w * (top * (1 - fy) + bottom * fy - 0.5)
         total /= math.sqrt(sum(w * w for w in weights) / 12.0)
         assert n[r - 10, c - 30] == pytest.approx(total, abs=1e-12)
+
+
+def test_heat_maps_drawn_in_forked_processes_are_the_same_bytes(tmp_path):
+    import threading
+
+    from lunar_drake.science import world as w
+
+    a = np.random.default_rng(5).normal(size=(64, 48))
+
+    def figures(tag):
+        return [(w.heat_map, (tmp_path / f"{tag}{i}.png", a + i),
+                 {"name": "oh_ppm", "resolution_m": 0.5, "z": np.cumsum(a, 0)})
+                for i in range(3)]  # fmt: skip
+
+    w._draw(figures("pool"), workers=2)  # forks where no other thread runs
+    hold = threading.Event()
+    other = threading.Thread(target=hold.wait)
+    other.start()  # with another thread alive the figures are drawn here
+    try:
+        w._draw(figures("here"), workers=2)
+    finally:
+        hold.set()
+        other.join()
+    for i in range(3):
+        assert (tmp_path / f"pool{i}.png").read_bytes() == (tmp_path / f"here{i}.png").read_bytes()

@@ -70,13 +70,10 @@ def _lattices(seed: int, names, *, window, resolution_m: float, scales_m):
     return nodes, origin, steps, weights / math.sqrt(float(np.sum(weights**2)) / 12.0)
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _fields(nodes, origin, steps, weights, row0, col0, out):  # pragma: no cover - numba
-    """``out[f, i, j]``: fractal value noise of field ``f`` at global cell ``(row0 + i,
-    col0 + j)``: per octave, the node values around the cell blended with the quintic
-    fade, less 0.5, times the octave's weight, summed."""
-    n_f, n_o = nodes.shape[0], nodes.shape[1]
-    rows, cols = out.shape[1], out.shape[2]
+@numba.njit(cache=True, error_model="numpy")
+def _columns(origin, steps, col0, cols):  # pragma: no cover - numba
+    """Per octave and column: the quintic fade across the cell and the node column."""
+    n_o = steps.size
     fxs = np.empty((n_o, cols))
     cxs = np.empty((n_o, cols), np.int64)
     for o in range(n_o):
@@ -86,25 +83,42 @@ def _fields(nodes, origin, steps, weights, row0, col0, out):  # pragma: no cover
             tx = x - ix
             fxs[o, j] = tx * tx * tx * (tx * (tx * 6.0 - 15.0) + 10.0)
             cxs[o, j] = int(ix) - origin[o, 1]
-    for i in numba.prange(rows):
-        acc = np.zeros((n_f, cols))
-        for o in range(n_o):
-            y = (row0 + i + 0.5) * steps[o]
-            iy = math.floor(y)
-            ty = y - iy
-            fy = ty * ty * ty * (ty * (ty * 6.0 - 15.0) + 10.0)
-            ry = int(iy) - origin[o, 0]
-            w = weights[o]
-            for f in range(n_f):
-                for j in range(cols):
-                    fx = fxs[o, j]
-                    cx = cxs[o, j]
-                    top = nodes[f, o, ry, cx] * (1 - fx) + nodes[f, o, ry, cx + 1] * fx
-                    bottom = nodes[f, o, ry + 1, cx] * (1 - fx) + nodes[f, o, ry + 1, cx + 1] * fx
-                    acc[f, j] += w * (top * (1 - fy) + bottom * fy - 0.5)
+    return fxs, cxs
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _row(nodes, origin, steps, weights, row, fxs, cxs, acc):  # pragma: no cover - numba
+    """``acc[f, j]``: fractal value noise of field ``f`` at global row ``row`` and the
+    columns of ``fxs, cxs``: per octave, the node values around the cell blended with
+    the quintic fade, less 0.5, times the octave's weight, summed."""
+    n_f, n_o = nodes.shape[0], nodes.shape[1]
+    cols = acc.shape[1]
+    acc[:] = 0.0
+    for o in range(n_o):
+        y = (row + 0.5) * steps[o]
+        iy = math.floor(y)
+        ty = y - iy
+        fy = ty * ty * ty * (ty * (ty * 6.0 - 15.0) + 10.0)
+        ry = int(iy) - origin[o, 0]
+        w = weights[o]
         for f in range(n_f):
             for j in range(cols):
-                out[f, i, j] = acc[f, j]
+                fx = fxs[o, j]
+                cx = cxs[o, j]
+                top = nodes[f, o, ry, cx] * (1 - fx) + nodes[f, o, ry, cx + 1] * fx
+                bottom = nodes[f, o, ry + 1, cx] * (1 - fx) + nodes[f, o, ry + 1, cx + 1] * fx
+                acc[f, j] += w * (top * (1 - fy) + bottom * fy - 0.5)
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _fields(nodes, origin, steps, weights, row0, col0, out):  # pragma: no cover - numba
+    """``out[f, i, j]``: the noise of field ``f`` at global cell ``(row0 + i, col0 + j)``
+    (see :func:`_row`)."""
+    fxs, cxs = _columns(origin, steps, col0, out.shape[2])
+    for i in numba.prange(out.shape[1]):
+        acc = np.empty((nodes.shape[0], out.shape[2]))
+        _row(nodes, origin, steps, weights, row0 + i, fxs, cxs, acc)
+        out[:, i, :] = acc
 
 
 def mineral_fields(
@@ -117,13 +131,11 @@ def mineral_fields(
     nodes, origin, steps, weights = _lattices(
         seed, names, window=window, resolution_m=resolution_m, scales_m=cfg.scales_m
     )
-    noise = np.empty((len(names), window[2], window[3]))
-    _fields(nodes, origin, steps, weights, int(window[0]), int(window[1]), noise)
     h = np.empty((window[2], window[3]), np.float32)
     out = np.empty((len(MINERALS), window[2], window[3]), np.float32)
-    _mix(noise, float(cfg.h_mean_ppm), float(cfg.h_amplitude),
-         np.asarray(cfg.abundances_wt_pct, np.float64), float(cfg.mineral_amplitude), h,
-         out)  # fmt: skip
+    _mix(nodes, origin, steps, weights, int(window[0]), int(window[1]), float(cfg.h_mean_ppm),
+         float(cfg.h_amplitude), np.asarray(cfg.abundances_wt_pct, np.float64),
+         float(cfg.mineral_amplitude), h, out)  # fmt: skip
     return h, out
 
 
@@ -145,18 +157,23 @@ def minerals_wt_pct(
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _mix(noise, h_mean, h_amp, means, amplitude, h, out):  # pragma: no cover - numba
-    """Field 0 of ``noise`` -> hydrogen ``h`` (log-normal, mean ``h_mean``); fields 1..
-    -> ``out`` (each mineral's mean times a log-normal, renormalised to 100 wt%)."""
+def _mix(nodes, origin, steps, weights, row0, col0, h_mean, h_amp, means, amplitude, h,
+         out):  # fmt: skip  # pragma: no cover - numba
+    """Row by row, the noise of every field (:func:`_row`), then field 0 -> hydrogen ``h``
+    (log-normal, mean ``h_mean``) and fields 1.. -> ``out`` (each mineral's mean times a
+    log-normal, renormalised to 100 wt%)."""
     nb = out.shape[0]
     rows, cols = out.shape[1], out.shape[2]
+    fxs, cxs = _columns(origin, steps, col0, cols)
     for i in numba.prange(rows):
+        noise = np.empty((nodes.shape[0], cols))
+        _row(nodes, origin, steps, weights, row0 + i, fxs, cxs, noise)
         v = np.empty(nb)
         for j in range(cols):
-            h[i, j] = h_mean * math.exp(h_amp * noise[0, i, j] - 0.5 * h_amp * h_amp)
+            h[i, j] = h_mean * math.exp(h_amp * noise[0, j] - 0.5 * h_amp * h_amp)
             total = 0.0
             for b in range(nb):
-                v[b] = means[b] * math.exp(amplitude * noise[b + 1, i, j])
+                v[b] = means[b] * math.exp(amplitude * noise[b + 1, j])
                 total += v[b]
             for b in range(nb):
                 out[b, i, j] = 100.0 * v[b] / total

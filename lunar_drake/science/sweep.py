@@ -342,6 +342,29 @@ def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode,
             az, bz = bz, az
 
 
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _turn(z, transpose, flip, out):  # pragma: no cover - numba
+    """``out[R, C]`` = ``z`` turned into the canonical frame, in 64-px blocks."""
+    nr, nc = out.shape
+    nb_r, nb_c = (nr + 63) // 64, (nc + 63) // 64
+    for b in numba.prange(nb_r * nb_c):
+        r0, c0 = (b // nb_c) * 64, (b % nb_c) * 64
+        for r in range(r0, min(r0 + 64, nr)):
+            for c in range(c0, min(c0 + 64, nc)):
+                cc = nc - 1 - c if flip else c
+                out[r, c] = z[cc, r] if transpose else z[r, cc]
+
+
+def canonical_dem(z: np.ndarray, orient) -> np.ndarray:
+    """``orient.canon(z)`` as a C-contiguous float64 copy (a blocked, threaded turn)."""
+    z = np.asarray(z)
+    if z.dtype not in (np.float32, np.float64):
+        z = z.astype(np.float64)
+    out = np.empty(orient.shape, np.float64)
+    _turn(z, bool(orient.transpose), bool(orient.flip), out)
+    return out
+
+
 class Sweep:
     """The sweep geometry of one azimuth over a grid, and its canonical DEM.
 
@@ -356,11 +379,7 @@ class Sweep:
         self.orient = sweep_orientation(azimuth_deg, z.shape)
         self.azimuth_deg = float(azimuth_deg)
         self.resolution_m = float(resolution_m)
-        self.zc = (
-            canonical
-            if canonical is not None
-            else np.ascontiguousarray(self.orient.canon(z), dtype=np.float32)
-        )
+        self.zc = canonical if canonical is not None else canonical_dem(z, self.orient)
         nr, nc = self.orient.shape
         s, w = line_shifts(self.orient.sigma, np.arange(nc))
         self.s, self.w = s.astype(np.int64), w
@@ -435,6 +454,7 @@ __all__ = [
     "SECTOR",
     "TANGENT",
     "Sweep",
+    "canonical_dem",
     "horizon_tangents",
     "near_plan",
     "set_threads",

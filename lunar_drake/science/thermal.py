@@ -32,7 +32,14 @@ from lunar_drake.render.horizon import HorizonMask, sweep_orientation
 from lunar_drake.render.lightmap import SUN_ANGULAR_RADIUS_DEG
 from lunar_drake.science.config import ThermalConfig
 from lunar_drake.science.sun_envelope import SunEnvelope
-from lunar_drake.science.sweep import EPOCH, SECTOR, Sweep, horizon_tangents, set_threads
+from lunar_drake.science.sweep import (
+    EPOCH,
+    SECTOR,
+    Sweep,
+    canonical_dem,
+    horizon_tangents,
+    set_threads,
+)
 
 #: Stefan-Boltzmann constant (W m^-2 K^-4).
 SIGMA_SB = 5.670374419e-8
@@ -135,7 +142,7 @@ def illumination(
         o = sweep_orientation(az, shape)
         if (o.transpose, o.flip) != key:
             key, zc = (o.transpose, o.flip), None
-            zc = np.ascontiguousarray(o.canon(z), dtype=np.float64)
+            zc = canonical_dem(z, o)
         sw = Sweep(z, azimuth_deg=az, resolution_m=resolution_m, chunk=chunk, near=near,
                    canonical=zc)  # fmt: skip
         par = sw.sun_par(flux_w_m2=flux, mask_deg=_mask_deg(horizon_mask, az),

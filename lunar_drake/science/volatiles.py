@@ -56,34 +56,46 @@ def frost_area_fraction(
 
 
 def oh_ppm(t_k: np.ndarray, *, config: OHConfig | None = None) -> np.ndarray:
-    """Surface OH (ppm) at temperature ``t_k`` (K): a falling logistic."""
+    """Surface OH (ppm, float32) at temperature ``t_k`` (K): a falling logistic."""
     cfg = config or OHConfig()
-    return _oh(np.asarray(t_k, np.float64), cfg.min_ppm, cfg.max_ppm, cfg.half_K, cfg.width_K)
+    t = np.ascontiguousarray(t_k)
+    out = np.empty(t.shape, np.float32)
+    _oh(t.reshape(-1), cfg.min_ppm, cfg.max_ppm, cfg.half_K, cfg.width_K, out.reshape(-1))
+    return out
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
-def _oh(t, lo, hi, half, width):  # pragma: no cover - numba
-    return lo + (hi - lo) * 0.5 * (1.0 - math.tanh(0.5 * (t - half) / width))
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _oh(t, lo, hi, half, width, out):  # pragma: no cover - numba
+    for i in numba.prange(t.size):
+        out[i] = lo + (hi - lo) * 0.5 * (1.0 - math.tanh(0.5 * (t[i] - half) / width))
 
 
 def dry_layer_m(
     t_max_k: np.ndarray, t_mean_k: np.ndarray, *, config: IceConfig | None = None
 ) -> np.ndarray:
-    """Depth of the ice-free top layer (m): where the decaying temperature wave's maximum
-    falls to ``stable_K`` (see :class:`~.config.IceConfig`), within ``[0, max_depth_m]``."""
+    """Depth of the ice-free top layer (m, float32): where the decaying temperature wave's
+    maximum falls to ``stable_K`` (see :class:`~.config.IceConfig`), within ``[0,
+    max_depth_m]``."""
     cfg = config or IceConfig()
-    return _dry(np.asarray(t_max_k, np.float64), np.asarray(t_mean_k, np.float64),
-                cfg.stable_K, cfg.skin_depth_m, cfg.max_depth_m)  # fmt: skip
+    t_max, t_mean = np.broadcast_arrays(np.asarray(t_max_k), np.asarray(t_mean_k))
+    t_max, t_mean = np.ascontiguousarray(t_max), np.ascontiguousarray(t_mean)
+    out = np.empty(t_max.shape, np.float32)
+    _dry(t_max.reshape(-1), t_mean.reshape(-1), cfg.stable_K, cfg.skin_depth_m,
+         cfg.max_depth_m, out.reshape(-1))  # fmt: skip
+    return out
 
 
-@numba.vectorize(["float64(float64, float64, float64, float64, float64)"], cache=True)
-def _dry(t_max, t_mean, stable, skin, deepest):  # pragma: no cover - numba
-    if t_max <= stable:
-        return 0.0
-    t_mean = min(t_mean, t_max)
-    if t_mean >= stable:
-        return deepest
-    return min(skin * math.log((t_max - t_mean) / (stable - t_mean)), deepest)
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _dry(t_max, t_mean, stable, skin, deepest, out):  # pragma: no cover - numba
+    for i in numba.prange(t_max.size):
+        hi = t_max[i]
+        lo = min(t_mean[i], hi)
+        if hi <= stable:
+            out[i] = 0.0
+        elif lo >= stable:
+            out[i] = deepest
+        else:
+            out[i] = min(skin * math.log((hi - lo) / (stable - lo)), deepest)
 
 
 def rim_factor(

@@ -187,10 +187,15 @@ class FileSink:
     """Writes streamed layer blocks as GeoTIFFs (windowed, each under a temporary name
     until complete), with per-layer statistics and decimated previews for the heat maps.
 
-    Use as a context manager; on an exception every unfinished file is discarded.
+    Blocks are range-checked at once, then written by one background thread in the order
+    they came (so a file's bytes never depend on it), overlapping the next block's
+    computation; a block must not change after :meth:`put`. Use as a context manager: on
+    leaving, every write is finished; on an exception every unfinished file is discarded.
     """
 
     def __init__(self, out_dir, *, shape, transform, crs, max_px: int = 640) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
         self.out = Path(out_dir)
         self.shape = tuple(shape)
         self.transform, self.crs = transform, crs
@@ -198,6 +203,8 @@ class FileSink:
         self.writers: dict = {}
         self.stats: dict = {}
         self.previews: dict = {}
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="world-writer")
+        self._pending: list = []
 
     def __enter__(self) -> FileSink:
         return self
@@ -217,30 +224,52 @@ class FileSink:
             self.writers[name] = w.__enter__()
             self.stats[name] = [math.inf, -math.inf, 0.0, 0]
             self.previews[name] = []
-        self.writers[name].write(block, row0=row0, col0=0)
         st = self.stats[name]
         st[0], st[1] = min(st[0], vmin), max(st[1], vmax)
+        self._pending.append(self._pool.submit(self._store, name, row0, block))
+        while len(self._pending) > 2:  # at most two blocks waiting: bounded memory
+            self._pending.pop(0).result()
+
+    def _store(self, name: str, row0: int, block: np.ndarray) -> None:
+        """The background part of :meth:`put`: the window, the sum and the preview."""
+        self.writers[name].write(block, row0=row0, col0=0)
+        st = self.stats[name]
         st[2] += float(np.sum(block, dtype=np.float64))
         st[3] += block.size
         first = (-row0) % self.step
         self.previews[name].append(np.array(block[..., first :: self.step, :: self.step]))
 
+    def flush(self) -> None:
+        """Waits for every block handed over so far (raises the first write error)."""
+        pending, self._pending = self._pending, []
+        for f in pending:
+            f.result()
+
     def preview(self, name: str) -> np.ndarray:
         """The layer decimated by ``step`` (every band of ``minerals``)."""
+        self.flush()
         return np.concatenate(self.previews[name], axis=-2)
 
     def summary(self) -> dict:
+        self.flush()
         return {n: {"unit": LAYERS[n][0], "min": st[0], "max": st[1], "mean": st[2] / st[3]}
                 for n, st in self.stats.items()}  # fmt: skip
 
     def __exit__(self, exc_type, exc, tb) -> None:
         err = None
+        try:
+            self.flush()
+        except Exception as e:  # a failed write: discard every file
+            err = e
+        self._pool.shutdown(wait=True)
+        if exc_type is None and err is not None:
+            exc_type, exc, tb = type(err), err, err.__traceback__
         for w in self.writers.values():
             try:
                 w.__exit__(exc_type, exc, tb)
             except Exception as e:  # keep closing the others; report the first
                 err = err or e
-        if err is not None and exc_type is None:
+        if err is not None and (exc is None or exc is err):
             raise err
 
 
@@ -318,7 +347,7 @@ def stream_world(
         t_mean[sl] = np.minimum(temps[1], temps[0])
         t_now = temps[2]
         sink.put("temperature_K", b.start, t_now)
-        sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh).astype(np.float32))
+        sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh))
     cold = (illum.ever_lit == 0) & (t_max < cfg.ice.stable_K)
     del illum, sources
     report("temperatures", 0.85)
@@ -340,7 +369,7 @@ def stream_world(
         sink.put("t_mean_K", b.start, t_mean[sl])
         sink.put("frost_area_frac", b.start, per_patch[labels[sl]].astype(np.float32))
         dry = volatiles.dry_layer_m(t_max[sl], t_mean[sl], config=cfg.ice)
-        sink.put("dry_layer_m", b.start, dry.astype(np.float32))
+        sink.put("dry_layer_m", b.start, dry)
         ice = volatiles.ice_wt_pct(dry, thermal.upsample(rim, k, b, cols), config=cfg.ice)
         sink.put("ice_wt_pct", b.start, ice.astype(np.float32))
         report("volatiles", 0.87 + 0.06 * b.stop / rows)
@@ -493,10 +522,16 @@ def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
     zp = None if z is None else np.asarray(z)[::step, ::step]
     if png:
         previews = {n: sink.preview(n) for n in sink.writers}
-        for name, arr in previews.items():
-            heat_map(out / f"{name}.png", arr, name=name, resolution_m=resolution_m * step, z=zp)
-        overview(out / "world.png", previews, resolution_m=resolution_m * step, z=zp,
-                 title=f"World model at {utc}")  # fmt: skip
+        # The overview (the longest) first, so that it does not finish last alone.
+        figures = [(overview, (out / "world.png", previews),
+                    {"resolution_m": resolution_m * step, "z": zp,
+                     "title": f"World model at {utc}"})]  # fmt: skip
+        figures += [
+            (heat_map, (out / f"{name}.png", arr),
+             {"name": name, "resolution_m": resolution_m * step, "z": zp})
+            for name, arr in previews.items()
+        ]  # fmt: skip
+        _draw(figures, workers=(config or WorldConfig()).workers)
     stats = sink.summary()
     summary = {
         "utc": utc,
@@ -521,6 +556,37 @@ def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
         summary["stage_seconds"] = {k: round(v, 2) for k, v in clock.stages.items()}
     atomic_write_text(out / "world.json", json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+_FIGURES: list = []
+
+
+def _draw_one(i: int) -> None:
+    fn, args, kwargs = _FIGURES[i]
+    fn(*args, **kwargs)
+
+
+def _draw(figures: list, *, workers: int) -> None:
+    """Calls each ``(fn, args, kwargs)`` of ``figures``: in ``workers`` forked processes
+    where the platform forks and this process runs no other Python thread (a fork copies
+    no lock another thread holds; each figure is drawn whole by one process, the same
+    bytes as here), else here, one after the other."""
+    import multiprocessing as mp
+    import threading
+
+    if (workers <= 1 or len(figures) < 2 or threading.active_count() > 1
+            or "fork" not in mp.get_all_start_methods()):  # fmt: skip
+        for fn, args, kwargs in figures:
+            fn(*args, **kwargs)
+        return
+    import matplotlib.figure  # noqa: F401  (imported once, before the fork)
+
+    _FIGURES[:] = figures  # the children inherit it; nothing is pickled but indices
+    try:
+        with mp.get_context("fork").Pool(min(workers, len(figures))) as pool:
+            pool.map(_draw_one, range(len(figures)), chunksize=1)
+    finally:
+        _FIGURES.clear()
 
 
 class _StageClock:
