@@ -318,16 +318,37 @@ def _cmd_world_build(args) -> int:
 
     config = WorldConfig()
     if args.config:
+        import yaml
         from pydrake.common.yaml import yaml_load_typed
 
         if not Path(args.config).is_file():
             raise ConfigError(f"--config {args.config!r} does not exist")
+        where = f"--config {args.config!r}"
         try:
-            config = yaml_load_typed(schema=WorldConfig, filename=args.config)
-        except RuntimeError as exc:
-            raise ConfigError(f"--config {args.config!r}: {str(exc).splitlines()[0]}") from None
+            raw = yaml.safe_load(Path(args.config).read_text())
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
+            what = getattr(exc, "problem", None) or type(exc).__name__
+            mark = getattr(exc, "problem_mark", None)
+            at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+            raise ConfigError(f"{where} is not valid YAML: {what}{at}") from None
+        if raw is not None and not isinstance(raw, dict):
+            raise ConfigError(
+                f"{where} holds a {type(raw).__name__}; it must be a mapping of sections "
+                "(the shape of world.json's 'config')"
+            )
+        if raw:  # an empty file: the defaults
+            try:
+                config = yaml_load_typed(schema=WorldConfig, filename=args.config)
+            except RuntimeError as exc:
+                raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
+        try:
+            config.validate()
+        except LunarDrakeError as exc:
+            raise type(exc)(f"{where}: {exc}") from None
     if args.workers is not None:
         config.workers = args.workers
+    if args.utc is not None and not args.utc.strip():
+        raise ConfigError("--utc '' is empty; give a UTC time such as 2027-11-15T00:00:00")
     from lunar_drake.files import check_replaceable, staged_directory
     from lunar_drake.science.world import WORLD_FILES
 
@@ -632,9 +653,11 @@ def build_parser() -> argparse.ArgumentParser:
     wb.add_argument("--utc", default=None,
                     help="epoch of the temperature and OH layers (default: the default "
                          "scenario's)")  # fmt: skip
-    wb.add_argument("--config", default=None, help="a WorldConfig YAML file")
+    wb.add_argument("--config", default=None,
+                    help="a WorldConfig YAML file (shaped as world.json's 'config')")  # fmt: skip
     wb.add_argument("--seed", type=int, default=None, help="noise seed (default: the site's)")
-    wb.add_argument("--workers", type=_positive_int, default=None)
+    wb.add_argument("--workers", type=_positive_int, default=None,
+                    help="threads (default: the config's, 2)")  # fmt: skip
     wb.add_argument("--no-progress", action="store_true")
     wb.set_defaults(func=_cmd_world_build)
 

@@ -196,7 +196,8 @@ def check_replaceable(path: str | os.PathLike, *, allowed, what: str) -> None:
         shown = ", ".join(repr(n) for n in foreign[:3]) + (", ..." if len(foreign) > 3 else "")
         raise OutputError(
             f"cannot write {what} {str(p)!r}: it exists and holds {len(foreign)} "
-            f"entries that are not {what} outputs ({shown}); it would be replaced as a "
+            f"{'entry that is' if len(foreign) == 1 else 'entries that are'} not {what} "
+            f"outputs ({shown}); it would be replaced as a "
             "whole, so give a new or empty directory"
         )
 

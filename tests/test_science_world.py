@@ -328,7 +328,28 @@ def test_world_config_file_and_bad_layers_on_disk(small_site, tmp_path, capsys):
         )
         == 2
     )
-    assert "bond_albedo = 1.5" in capsys.readouterr().err
+    assert "thermal.bond_albedo = 1.5" in capsys.readouterr().err
+    # Not YAML, a Python tag, not a mapping, OH limits crossed, an empty --utc, no site:
+    # one line each, exit 2, naming what is wrong; nothing built.
+    refusals = [
+        ("oh: [1, 2\n", "is not valid YAML"),
+        ("!!python/object/apply:os.system [echo]\n", "is not valid YAML"),
+        ("- 1\n- 2\n", "holds a list"),
+        ("oh: {min_ppm: 800}\n", "oh.min_ppm = 800.0 is above max_ppm = 750.0"),
+    ]
+    for i, (text, msg) in enumerate(refusals):
+        f = tmp_path / f"refused{i}.yaml"
+        f.write_text(text)
+        argv = ["world", "build", site_dir, "--out", str(tmp_path / "w"), "--config", str(f)]
+        assert main([*argv, "--no-progress"]) == 2, text
+        err = capsys.readouterr().err.strip()
+        assert msg in err and len(err.splitlines()) == 1, err
+    argv = ["world", "build", site_dir, "--out", str(tmp_path / "w"), "--no-progress"]
+    assert main([*argv, "--utc", " "]) == 2
+    assert "--utc '' is empty" in capsys.readouterr().err
+    assert main(["world", "build", str(tmp_path / "nowhere"), "--out", str(tmp_path / "w")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "w").exists()
     typo = tmp_path / "typo.yaml"
     typo.write_text("thermal: {albedo: 0.1}\n")
     assert (
@@ -347,6 +368,10 @@ def test_world_config_file_and_bad_layers_on_disk(small_site, tmp_path, capsys):
         == 2
     )
     assert "albedo" in capsys.readouterr().err
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("# all defaults\n")
+    assert main(["world", "build", site_dir, "--out", str(tmp_path / "w0"), "--config",
+                 str(empty), "--no-progress"]) == 0  # fmt: skip
     good = tmp_path / "good.yaml"
     good.write_text("sun: {azimuth_bins: 8}\nminerals: {scales_m: [20.0, 5.0]}\n")
     out = tmp_path / "w"

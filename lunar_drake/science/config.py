@@ -10,7 +10,7 @@ Defaults and where they come from are in each docstring; every field is checked 
 
 import dataclasses as dc
 
-from lunar_drake.errors import ConfigError, check_range
+from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 
 
 @dc.dataclass
@@ -137,7 +137,12 @@ class OHConfig:
 
     def validate(self) -> None:
         check_range("min_ppm", self.min_ppm, 0.0, 1e5, unit=" ppm")
-        check_range("max_ppm", self.max_ppm, self.min_ppm, 1e5, unit=" ppm (>= min_ppm)")
+        check_range("max_ppm", self.max_ppm, 0.0, 1e5, unit=" ppm")
+        if self.min_ppm > self.max_ppm:
+            raise OutOfRangeError(
+                f"min_ppm = {self.min_ppm!r} is above max_ppm = {self.max_ppm!r}; "
+                "allowed min_ppm <= max_ppm (ppm)"
+            )
         check_range("half_K", self.half_K, 0.0, 500.0, lo_open=True, unit=" K")
         check_range("width_K", self.width_K, 0.0, 500.0, lo_open=True, unit=" K")
 
@@ -261,8 +266,12 @@ class WorldConfig:
     workers: int = 2
 
     def validate(self) -> None:
-        for part in (self.sun, self.thermal, self.frost, self.oh, self.ice, self.minerals):
-            part.validate()
+        """Raises the section's error, its message prefixed with the section's name."""
+        for name in ("sun", "thermal", "frost", "oh", "ice", "minerals"):
+            try:
+                getattr(self, name).validate()
+            except LunarDrakeError as exc:
+                raise type(exc)(f"{name}.{exc}") from None
         _int_range("tile_px", self.tile_px, 64, 16384)
         _int_range("workers", self.workers, 1, 64)
 

@@ -93,6 +93,7 @@ def sun_envelope(hf, *, utc: str, config: SunEnvelopeConfig | None = None) -> Su
     """The Sun's envelope at the centre of heightfield ``hf`` over ``config.years`` from
     ``utc`` (SPICE, ``method="fast"``)."""
     from lunar_drake.ephemeris.sun_earth import (
+        EphemerisRangeError,
         SiteLocation,
         enu_basis,
         sun_earth_enu,
@@ -107,7 +108,13 @@ def sun_envelope(hf, *, utc: str, config: SunEnvelopeConfig | None = None) -> Su
     span = cfg.years * 365.25 * 86400.0
     n = max(2, math.ceil(span / (cfg.step_h * 3600.0)))
     t = t0 + np.arange(n) * (cfg.step_h * 3600.0)
-    se = sun_earth_enu(epoch_tdb_s=t, site=site, method="fast")
+    try:
+        se = sun_earth_enu(epoch_tdb_s=t, site=site, method="fast")
+    except EphemerisRangeError as exc:
+        raise EphemerisRangeError(
+            f"the Sun's envelope samples {cfg.years:g} year(s) from {utc!r}, which runs past "
+            f"the ephemeris: {exc}"
+        ) from None
     return envelope_from_samples(
         se.sun_azimuth_deg,
         se.sun_elevation_deg,

@@ -426,6 +426,11 @@ def build_world(
     cfg.validate()
     site_dir = Path(site_dir)
     dem = site_dir / "dem.tif"
+    if not site_dir.is_dir():
+        raise RasterNotFoundError(
+            f"site {str(site_dir)!r} does not exist (a site directory from 'lunar-drake "
+            "terrain synth' is needed)"
+        )
     if not dem.is_file():
         raise RasterNotFoundError(
             f"site {str(site_dir)!r} has no dem.tif; a site directory from 'lunar-drake "
