@@ -201,6 +201,11 @@ def test_written_files_do_not_depend_on_the_block_size(tmp_path):
                 sink.put("minerals", r0, minerals[:, r0 : r0 + step])
         digests.append([(out / f).read_bytes() for f in ("temperature_K.tif", "minerals.tif")])
         assert sink.summary()["temperature_K"]["max"] == pytest.approx(float(temp.max()))
+        bands = sink.summary()["minerals"]["bands"]
+        assert list(bands) == ["plagioclase", "pyroxene", "olivine", "ilmenite"]
+        for b, name in enumerate(bands):
+            assert bands[name]["max"] == pytest.approx(float(minerals[b].max()))
+            assert bands[name]["mean"] == pytest.approx(float(minerals[b].mean(dtype=float)))
     assert digests[0] == digests[1] == digests[2]
 
 

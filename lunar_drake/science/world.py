@@ -202,6 +202,7 @@ class FileSink:
         self.step = max(1, math.ceil(max(self.shape) / max_px))
         self.writers: dict = {}
         self.stats: dict = {}
+        self.band_stats: dict = {}
         self.previews: dict = {}
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="world-writer")
         self._pending: list = []
@@ -231,11 +232,18 @@ class FileSink:
             self._pending.pop(0).result()
 
     def _store(self, name: str, row0: int, block: np.ndarray) -> None:
-        """The background part of :meth:`put`: the window, the sum and the preview."""
+        """The background part of :meth:`put`: the window, the sums (and each band's
+        extremes and sum) and the preview."""
         self.writers[name].write(block, row0=row0, col0=0)
         st = self.stats[name]
         st[2] += float(np.sum(block, dtype=np.float64))
         st[3] += block.size
+        if block.ndim == 3:
+            bands = self.band_stats.setdefault(name, [[math.inf, -math.inf, 0.0]
+                                                      for _ in range(block.shape[0])])  # fmt: skip
+            for b, bs in zip(block, bands, strict=True):
+                bs[0], bs[1] = min(bs[0], float(b.min())), max(bs[1], float(b.max()))
+                bs[2] += float(np.sum(b, dtype=np.float64))
         first = (-row0) % self.step
         self.previews[name].append(np.array(block[..., first :: self.step, :: self.step]))
 
@@ -251,9 +259,17 @@ class FileSink:
         return np.concatenate(self.previews[name], axis=-2)
 
     def summary(self) -> dict:
+        """Per layer: unit, min, max, mean; a multi-band layer (``minerals``) also each
+        band's, by name, under ``bands``."""
         self.flush()
-        return {n: {"unit": LAYERS[n][0], "min": st[0], "max": st[1], "mean": st[2] / st[3]}
-                for n, st in self.stats.items()}  # fmt: skip
+        out = {n: {"unit": LAYERS[n][0], "min": st[0], "max": st[1], "mean": st[2] / st[3]}
+               for n, st in self.stats.items()}  # fmt: skip
+        for n, bands in self.band_stats.items():
+            per_band = self.stats[n][3] / len(bands)
+            names = MINERALS if n == "minerals" else [f"band{i + 1}" for i in range(len(bands))]
+            out[n]["bands"] = {nm: {"min": b[0], "max": b[1], "mean": b[2] / per_band}
+                               for nm, b in zip(names, bands, strict=True)}  # fmt: skip
+        return out
 
     def __exit__(self, exc_type, exc, tb) -> None:
         err = None
