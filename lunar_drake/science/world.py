@@ -589,13 +589,15 @@ def _draw_one(i: int) -> None:
 
 def _draw(figures: list, *, workers: int) -> None:
     """Calls each ``(fn, args, kwargs)`` of ``figures``: in ``workers`` forked processes
-    where the platform forks and this process runs no other Python thread (a fork copies
-    no lock another thread holds; each figure is drawn whole by one process, the same
-    bytes as here), else here, one after the other."""
+    where the platform forks and this process runs no other Python thread but tqdm's
+    monitor (a fork copies no lock another thread holds; each figure is drawn whole by
+    one process, the same bytes as here), else here, one after the other."""
     import multiprocessing as mp
     import threading
 
-    if (workers <= 1 or len(figures) < 2 or threading.active_count() > 1
+    others = [t for t in threading.enumerate()
+              if t is not threading.current_thread() and t.name != "tqdm_monitor"]  # fmt: skip
+    if (workers <= 1 or len(figures) < 2 or others
             or "fork" not in mp.get_all_start_methods()):  # fmt: skip
         for fn, args, kwargs in figures:
             fn(*args, **kwargs)
