@@ -77,8 +77,10 @@ def dry_layer_m(
     maximum falls to ``stable_K`` (see :class:`~.config.IceConfig`), within ``[0,
     max_depth_m]``."""
     cfg = config or IceConfig()
-    t_max, t_mean = np.broadcast_arrays(np.asarray(t_max_k), np.asarray(t_mean_k))
-    t_max, t_mean = np.ascontiguousarray(t_max), np.ascontiguousarray(t_mean)
+    t_max, t_mean = np.asarray(t_max_k), np.asarray(t_mean_k)
+    shape = np.broadcast_shapes(t_max.shape, t_mean.shape)
+    t_max = np.ascontiguousarray(np.broadcast_to(t_max, shape))
+    t_mean = np.ascontiguousarray(np.broadcast_to(t_mean, shape))
     out = np.empty(t_max.shape, np.float32)
     _dry(t_max.reshape(-1), t_mean.reshape(-1), cfg.stable_K, cfg.skin_depth_m,
          cfg.max_depth_m, out.reshape(-1))  # fmt: skip
