@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -494,3 +495,22 @@ def test_heat_maps_drawn_in_forked_processes_are_the_same_bytes(tmp_path):
         other.join()
     for i in range(3):
         assert (tmp_path / f"pool{i}.png").read_bytes() == (tmp_path / f"here{i}.png").read_bytes()
+    # Which process drew: children in the pool (when no other thread runs), this one else.
+    alone = not [t for t in threading.enumerate()
+                 if t is not threading.current_thread() and t.name != "tqdm_monitor"]  # fmt: skip
+    w._draw([(_write_pid, (tmp_path / f"pid{i}",), {}) for i in range(3)], workers=2)
+    pids = {int((tmp_path / f"pid{i}").read_text()) for i in range(3)}
+    assert (os.getpid() not in pids) == alone
+    other = threading.Thread(target=hold.wait)
+    hold.clear()
+    other.start()
+    try:
+        w._draw([(_write_pid, (tmp_path / f"pid{i}",), {}) for i in range(3)], workers=2)
+    finally:
+        hold.set()
+        other.join()
+    assert {int((tmp_path / f"pid{i}").read_text()) for i in range(3)} == {os.getpid()}
+
+
+def _write_pid(path) -> None:
+    path.write_text(str(os.getpid()))
