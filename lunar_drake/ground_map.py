@@ -2,7 +2,8 @@
 
 The ground's final costmap (the a-priori map refined, with the hazards its stereo found
 merged in; grey: cost per metre, red: lethal or within the rover's footprint of a
-hazard) around the traverse, the rover's true path (white), the ground's own pose
+hazard, purple: the orbital map's steep cells stereo has not yet seen, lethal until it
+does) around the traverse, the rover's true path (white), the ground's own pose
 estimate (cyan, dashed; VO-corrected when its perception runs), its stereo keyframes
 (dots: green VO fused, orange gated, red rejected) and the goals (stars). Matplotlib
 without pyplot (no backend forced on the caller); the PNG carries no software tag, so
@@ -26,6 +27,8 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
     traverse and the goals with ``margin_m`` (m) round them. Returns the path, or None
     when the run kept no ground costmap."""
     from matplotlib.figure import Figure
+
+    from lunar_drake.autonomy.planner import draw_unconfirmed
 
     cm = logs.ground_costmap
     if cm is None:
@@ -53,6 +56,8 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
     lethal = np.ma.masked_where(np.isfinite(cost), np.ones(cost.shape))
     ax.imshow(lethal, extent=extent, cmap="autumn", origin="upper", alpha=0.6,
               interpolation="nearest")  # fmt: skip
+    if cm.unconfirmed is not None:
+        draw_unconfirmed(ax, cm.unconfirmed[r0:r1, c0:c1], extent=extent)
     ax.plot(truth[:, 0], truth[:, 1], color="white", lw=2.2)
     ax.plot(truth[:, 0], truth[:, 1], color="black", lw=0.8, label="truth")
     if len(est_xy):
@@ -71,7 +76,10 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
     ax.set_xlabel("x (m, east)")
     ax.set_ylabel("y (m, north)")
     ax.set_aspect("equal")
-    ax.set_title(f"The ground's map at t = {logs.simulated_s:.0f} s (red: hazards)", fontsize=11)
+    title = f"The ground's map at t = {logs.simulated_s:.0f} s (red: hazards"
+    if cm.unconfirmed is not None:
+        title += "; purple: steep, unseen"
+    ax.set_title(title + ")", fontsize=11)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     path = Path(path)

@@ -14,7 +14,7 @@ from lunar_drake.autonomy.costmap import (
     build_costmap,
     orbital_dem,
 )
-from lunar_drake.autonomy.planner import plan_path
+from lunar_drake.autonomy.planner import PlanningError, plan_path
 from lunar_drake.errors import ConfigError, OutOfRangeError
 from lunar_drake.models.rover_description import rover_preset
 from lunar_drake.perception.elevation_map import (
@@ -456,3 +456,72 @@ def test_a_rock_seen_once_counts_only_when_it_stands_far_over_the_limit(boulder)
     low = stereo_hazards(em, hazards=boulder["hazards"], rover=ROVER,
                          config=dc.replace(twice, tall_views=1, tall_factor=2.0))  # fmt: skip
     assert not low.lethal.any()
+
+
+class _Heightfield:
+    """The little a site heightfield the ground's map reads: bounds, pixel, windows."""
+
+    def __init__(self, z, resolution_m):
+        from types import SimpleNamespace
+
+        self.z, self.resolution_m, self.shape = z, resolution_m, z.shape
+        half = z.shape[0] * resolution_m / 2
+        self.bounds = SimpleNamespace(left=-half, right=half, bottom=-half, top=half)
+
+    def read_window(self, row0, col0, rows, cols):
+        return self.z[row0 : row0 + rows, col0 : col0 + cols]
+
+
+def test_steep_orbital_cells_are_lethal_until_stereo_has_seen_them():
+    from lunar_drake.autonomy.costmap import MapConfig, costmap_for_site
+
+    # A 12.5 deg ramp for x in [0, 8] m between flat ground: under the 14 deg limit,
+    # over the 11 deg at which an orbital cell is not trusted.
+    X, _ = _dem_grid()
+    t = math.tan(math.radians(12.5))
+    z = t * np.clip(X, 0.0, 8.0)
+    hf = _Heightfield(z, RES)
+    hzc = HazardConfig(resolution_m=1.0)
+    kw = {"heightfield": hf, "points_xy": [(-12.0, 0.0), (12.0, 0.0)], "rover": ROVER,
+          "hazards": hzc, "seed": 0}  # fmt: skip
+    orbital = MapConfig(source="orbital", orbital_noise_m=0.0, margin_m=5.0)
+    cm = costmap_for_site(map_config=orbital, **kw)
+    steep = cm.slope_deg > 11.0
+    assert steep.sum() >= 5 * 10 and np.all(cm.slope_deg < 14.0)  # the ramp's interior
+    np.testing.assert_array_equal(cm.unconfirmed, steep)
+    assert cm.lethal_raw[steep].all() and np.isinf(cm.cost[steep]).all()
+    with pytest.raises(PlanningError, match="no hazard-free path"):
+        plan_path(costmap=cm, start_xy=(-10.0, 0.0), goal_xy=(10.0, 0.0))
+    with pytest.raises(PlanningError, match=r"orbital map, over ground.map.confirm_slope_deg"):
+        plan_path(costmap=cm, start_xy=(-10.0, 0.0), goal_xy=(4.0, 0.0))
+    trusting = (dc.replace(orbital, confirm_slope_deg=0.0), MapConfig(source="truth", margin_m=5.0))
+    for off in trusting:
+        trusted = costmap_for_site(map_config=off, **kw)
+        assert trusted.unconfirmed is None and not trusted.lethal_raw.any()
+    # Stereo sees the ramp for x in [1, 5] m, |y| <= 3 m: those cells are confirmed
+    # (stereo's slope, under the limit, judges them); the rest stay unconfirmed.
+    g = np.random.default_rng(7)
+    xy = np.column_stack([g.uniform(1.0, 5.0, 80_000), g.uniform(-3.0, 3.0, 80_000)])
+    pts = np.column_stack([xy, t * xy[:, 0] + g.normal(0.0, 0.005, len(xy))])
+    cfg = ElevationMapConfig(min_range_m=0.0)
+    em = fuse(ElevationMap.covering(cm), points_W=pts, sensor_origin_W=(0.0, 0.0, 1.5),
+              config=cfg)  # fmt: skip
+    hz = stereo_hazards(em, hazards=hzc, rover=ROVER, config=cfg)
+    assert not hz.lethal.any()
+    merged = merge_into_costmap(cm, stereo=hz, rover=ROVER, hazards=hzc)
+    rr, cc = np.mgrid[0 : cm.shape[0], 0 : cm.shape[1]]
+    x, y = cm.centre_of(rr, cc)
+    seen = (x > 1.0) & (x < 5.0) & (np.abs(y) < 3.0)
+    assert (steep & seen).sum() >= 4 * 6
+    assert not merged.unconfirmed[seen].any() and not merged.lethal_raw[seen].any()
+    np.testing.assert_array_equal(merged.unconfirmed, steep & ~seen)
+    np.testing.assert_array_equal(merged.lethal_raw, steep & ~seen)
+    # A steeper ramp seen by stereo (20 deg) is confirmed lethal: stereo's word.
+    pts20 = np.column_stack([xy, math.tan(math.radians(20.0)) * xy[:, 0]])
+    em20 = fuse(ElevationMap.covering(cm), points_W=pts20, sensor_origin_W=(0.0, 0.0, 1.5),
+                config=cfg)  # fmt: skip
+    hz20 = stereo_hazards(em20, hazards=hzc, rover=ROVER, config=cfg)
+    m20 = merge_into_costmap(cm, stereo=hz20, rover=ROVER, hazards=hzc)
+    assert not m20.unconfirmed[seen].any() and m20.lethal_raw[seen & steep].all()
+    with pytest.raises(OutOfRangeError, match="confirm_slope_deg"):
+        dc.replace(orbital, confirm_slope_deg=95.0).validate()

@@ -20,6 +20,12 @@ max_slope)^2 + roughness_weight (roughness / max_roughness)^2`` per metre; letha
 
 :func:`orbital_dem` gives the map a mission would have from orbit: the DEM averaged over
 blocks of ``orbital_resolution_m`` (rocks vanish, craters stay) plus seeded noise.
+An orbital map's metre-scale slope hides rover-scale ones: on the default site, 1 m
+cells at 10-12 deg are 48 % lethal at the planning grid, at 12-14 deg 73 %
+(``benchmarks/orbital_trust.py``). So orbital cells steeper than
+``MapConfig.confirm_slope_deg`` are *unconfirmed*: lethal (``Costmap.unconfirmed``)
+until stereo covers them (:func:`~lunar_drake.perception.elevation_map.
+merge_into_costmap`), when stereo's layers judge them.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
@@ -87,12 +93,16 @@ class MapConfig:
             plus seeded noise: rocks vanish, craters stay, as in orbital data).
         orbital_resolution_m: orbital DEM pixel (m). orbital_noise_m: its noise (m).
         margin_m: map margin around the start and the goal (m).
+        confirm_slope_deg: orbital cells steeper than this (deg) are lethal until stereo
+            has seen them (module docstring); 0: trust the orbital map; not used with
+            ``truth``.
     """
 
     source: str = "truth"
     orbital_resolution_m: float = 1.0
     orbital_noise_m: float = 0.05
     margin_m: float = 20.0
+    confirm_slope_deg: float = 11.0
 
     def validate(self) -> None:
         if self.source not in MAP_SOURCES:
@@ -100,6 +110,7 @@ class MapConfig:
         check_range("orbital_resolution_m", self.orbital_resolution_m, 0.01, 1e4, unit=" m")
         check_range("orbital_noise_m", self.orbital_noise_m, 0.0, 100.0, unit=" m")
         check_range("margin_m", self.margin_m, 0.0, 1e5, unit=" m")
+        check_range("confirm_slope_deg", self.confirm_slope_deg, 0.0, 90.0, unit=" deg")
 
 
 @dc.dataclass(frozen=True)
@@ -142,6 +153,7 @@ class Costmap:
     x0_m: float
     y1_m: float
     resolution_m: float
+    unconfirmed: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple:
@@ -223,15 +235,23 @@ def hazard_limits(config: HazardConfig, rover: RoverEnvelope) -> tuple:
 
 def costmap_from_layers(*, slope_deg, step_m, roughness_m, lethal_raw, resolution_m: float,
                         x0_m: float, y1_m: float, rover: RoverEnvelope,
-                        config: HazardConfig) -> Costmap:  # fmt: skip
+                        config: HazardConfig, unconfirmed=None) -> Costmap:  # fmt: skip
     """The costmap of hazard layers already on the planning grid (cell ``resolution_m``;
-    west edge ``x0_m``, north edge ``y1_m``): ``lethal_raw`` inflated by the rover's
+    west edge ``x0_m``, north edge ``y1_m``): ``lethal_raw`` (with ``unconfirmed``, a
+    mask of cells lethal until stereo sees them, if given) inflated by the rover's
     footprint radius plus ``config.inflation_m``, free cells costed from slope and
     roughness (module docstring). :func:`build_costmap` ends here."""
     config.validate()
     slope = np.asarray(slope_deg, np.float64)
     rough = np.asarray(roughness_m, np.float64)
     lethal = np.asarray(lethal_raw, bool)
+    if unconfirmed is not None:
+        unconfirmed = np.asarray(unconfirmed, bool)
+        if unconfirmed.shape != lethal.shape:
+            raise ConfigError(
+                f"unconfirmed has shape {unconfirmed.shape}; the layers {lethal.shape}"
+            )
+        lethal = lethal | unconfirmed
     radius = rover.footprint_radius_m + config.inflation_m
     if lethal.any():
         dist = ndimage.distance_transform_edt(~lethal) * resolution_m
@@ -253,6 +273,7 @@ def costmap_from_layers(*, slope_deg, step_m, roughness_m, lethal_raw, resolutio
         x0_m=float(x0_m),
         y1_m=float(y1_m),
         resolution_m=float(resolution_m),
+        unconfirmed=unconfirmed,
     )
 
 
@@ -304,10 +325,19 @@ def map_dem_for_site(*, heightfield, points_xy, map_config: MapConfig, seed: int
 def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
                      map_config: MapConfig, seed: int) -> Costmap:  # fmt: skip
     """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
-    ``heightfield``: the DEM of :func:`map_dem_for_site`, through :func:`build_costmap`."""
+    ``heightfield``: the DEM of :func:`map_dem_for_site`, through :func:`build_costmap`;
+    an orbital map's cells steeper than ``map_config.confirm_slope_deg`` unconfirmed."""
     z, res, x0, y1 = map_dem_for_site(heightfield=heightfield, points_xy=points_xy,
                                       map_config=map_config, seed=seed)  # fmt: skip
-    return build_costmap(z, resolution_m=res, x0_m=x0, y1_m=y1, rover=rover, config=hazards)
+    cm = build_costmap(z, resolution_m=res, x0_m=x0, y1_m=y1, rover=rover, config=hazards)
+    if map_config.source != "orbital" or map_config.confirm_slope_deg <= 0.0:
+        return cm
+    unconfirmed = (cm.slope_deg > map_config.confirm_slope_deg) & ~cm.lethal_raw
+    return costmap_from_layers(
+        slope_deg=cm.slope_deg, step_m=cm.step_m, roughness_m=cm.roughness_m,
+        lethal_raw=cm.lethal_raw, resolution_m=cm.resolution_m, x0_m=cm.x0_m, y1_m=cm.y1_m,
+        rover=rover, config=hazards, unconfirmed=unconfirmed,
+    )  # fmt: skip
 
 
 __all__ = [

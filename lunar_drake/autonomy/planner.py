@@ -107,10 +107,18 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
         moved = nearest_free_cell(costmap, g, goal_free_radius_m) if goal_free_radius_m else None
         if moved is None:
             near = f" and no free cell lies within {goal_free_radius_m:g} m of it"
+            why = (
+                f"slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
+                "within the rover's footprint of one"
+            )
+            if costmap.unconfirmed is not None and costmap.unconfirmed[g]:
+                why = (
+                    f"slope {costmap.slope_deg[g]:.1f} deg on the orbital map, over "
+                    "ground.map.confirm_slope_deg: lethal until stereo has seen it"
+                )
             raise PlanningError(
                 f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
-                f"(slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
-                "within the rover's footprint of one)" + (near if goal_free_radius_m else "")
+                f"({why})" + (near if goal_free_radius_m else "")
             )
         g = moved
         end_xy = tuple(float(v) for v in costmap.centre_of(*g))
@@ -182,8 +190,19 @@ def path_blocked(*, costmap: Costmap, path_xy, from_xy, free_radius_m: float = 1
     return False
 
 
+def draw_unconfirmed(ax, unconfirmed, *, extent) -> None:
+    """Purple over the ``unconfirmed`` cells (bool (rows, cols) or None; steep orbital
+    cells stereo has not yet seen) of a costmap drawn with ``extent``."""
+    if unconfirmed is None or not np.any(unconfirmed):
+        return
+    mask = np.ma.masked_where(~np.asarray(unconfirmed, bool), np.ones(np.shape(unconfirmed)))
+    ax.imshow(mask, extent=extent, cmap="Purples", vmin=0.0, vmax=1.0, origin="upper",
+              alpha=0.7, interpolation="nearest")  # fmt: skip
+
+
 def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> None:
-    """Draws the costmap (grey: cost, red: lethal) and the path on a matplotlib axis."""
+    """Draws the costmap (grey: cost, red: lethal, purple: unconfirmed) and the path on
+    a matplotlib axis."""
     rows, cols = costmap.shape
     res = costmap.resolution_m
     extent = (costmap.x0_m, costmap.x0_m + cols * res, costmap.y1_m - rows * res, costmap.y1_m)
@@ -191,6 +210,7 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     ax.imshow(finite, extent=extent, cmap="Greys", origin="upper")
     lethal = np.ma.masked_where(np.isfinite(costmap.cost), np.ones(costmap.shape))
     ax.imshow(lethal, extent=extent, cmap="autumn", origin="upper", alpha=0.6)
+    draw_unconfirmed(ax, costmap.unconfirmed, extent=extent)
     if path is not None:
         ax.plot(path.waypoints_xy[:, 0], path.waypoints_xy[:, 1], "c.-", lw=1.5)
         ax.plot(*path.waypoints_xy[0], "go")
@@ -202,4 +222,12 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     ax.set_aspect("equal")
 
 
-__all__ = ["Path", "PlanningError", "nearest_free_cell", "path_blocked", "plan_path", "plot_plan"]
+__all__ = [
+    "Path",
+    "PlanningError",
+    "draw_unconfirmed",
+    "nearest_free_cell",
+    "path_blocked",
+    "plan_path",
+    "plot_plan",
+]

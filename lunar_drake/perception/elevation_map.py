@@ -443,7 +443,10 @@ def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverE
     ``upsample`` (a finer grid for rover-scale rocks; the prior's layers repeated).
     ``stereo_clears``: planning cells at least ``clear_coverage`` (fraction of their area)
     covered by known cells take stereo's layers and lethality alone, clearing the
-    prior's hazards there (off by default: see the module docstring)."""
+    prior's hazards there (off by default: see the module docstring). The prior's
+    *unconfirmed* cells (``costmap.unconfirmed``: steep on the orbital map) are cleared
+    that way always: once ``clear_coverage`` of one is known, stereo's lethality alone
+    judges it and it is no longer unconfirmed."""
     hazards.validate()
     if isinstance(upsample, bool) or not isinstance(upsample, int | np.integer):
         raise ConfigError(f"upsample = {upsample!r} must be an integer")
@@ -456,6 +459,7 @@ def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverE
 
     slope, step, rough = up(costmap.slope_deg), up(costmap.step_m), up(costmap.roughness_m)
     lethal = up(costmap.lethal_raw).astype(bool)
+    unconfirmed = None if costmap.unconfirmed is None else up(costmap.unconfirmed).astype(bool)
     res = costmap.resolution_m / k
     rows, cols = lethal.shape
     # Known stereo cells -> the planning cell holding their centre.
@@ -478,14 +482,19 @@ def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverE
     layers = [np.where(seen, np.maximum(p, s), p)
               for p, s in zip((slope, step, rough), s_layers, strict=True)]  # fmt: skip
     lethal = lethal | s_lethal
+    clear = coverage >= clear_coverage
     if stereo_clears:
-        clear = coverage >= clear_coverage
         layers = [np.where(clear, s, p) for p, s in zip(layers, s_layers, strict=True)]
         lethal = np.where(clear, s_lethal, lethal)
+    if unconfirmed is not None:
+        confirmed = unconfirmed & clear
+        lethal = np.where(confirmed, s_lethal, lethal)
+        unconfirmed = unconfirmed & ~confirmed
     slope, step, rough = layers
     return costmap_from_layers(
         slope_deg=slope, step_m=step, roughness_m=rough, lethal_raw=lethal, resolution_m=res,
         x0_m=costmap.x0_m, y1_m=costmap.y1_m, rover=rover, config=hazards,
+        unconfirmed=unconfirmed,
     )  # fmt: skip
 
 

@@ -362,9 +362,9 @@ def perception_step(
         # Unknown cells filled from the nearest known one, not the prior: the orbital
         # DEM differs from stereo by more than a step at the edges of what was seen.
         haz = stereo_hazards(emap, hazards=hazards, rover=rover, config=map_cfg)
-        before = int(np.count_nonzero(s.costmap.lethal_raw))
         costmap = merge_into_costmap(s.costmap, stereo=haz, rover=rover, hazards=hazards)
-        new_lethal = int(np.count_nonzero(costmap.lethal_raw)) - before
+        # Cells stereo made lethal (confirming steep orbital cells may clear others).
+        new_lethal = int(np.count_nonzero(costmap.lethal_raw & ~s.costmap.lethal_raw))
         rec = KeyframeRecord(
             t_capture_s=float(frame.t_capture_s), frame_index=int(frame.frame_index),
             points=len(cloud), vo=vo, reason=reason, fitness=float(fit),
