@@ -11,8 +11,12 @@ cells holding any true hazard. Where more than half an orbital cell is lethal in
 orbital map's "free" is more likely wrong than right: that is where
 ``ground.map.confirm_slope_deg`` (lethal until stereo has seen it) belongs. JSON: ``bins``
 (``lo_deg, hi_deg, cells, lethal_fraction, any_lethal_fraction``), ``crossing_deg`` (the
-slope where ``lethal_fraction`` crosses 0.5, interpolated between bin centres), ``scenario``.
-Prints a table.
+slope where ``lethal_fraction`` crosses 0.5, interpolated between bin centres),
+``hazard_fraction`` / ``unconfirmed_fraction`` (of the orbital cells: hazards, and the
+steep cells the rule adds), ``blocked_fraction`` / ``blocked_trusting_fraction`` (of the
+cells of the grid the ground plans on, ``ground.hazards.resolution_m``: lethal after
+inflation by the rover's footprint, with the rule and without),
+``scenario``. Prints a table.
 """
 
 from __future__ import annotations
@@ -78,6 +82,7 @@ def main(argv=None) -> int:
     import dataclasses as dc
 
     from lunar_drake.autonomy.costmap import MapConfig, RoverEnvelope, costmap_for_site
+    from lunar_drake.perception.elevation_map import refined_costmap
     from lunar_drake.scenario_files import load_scenario
     from lunar_drake.site import load_site
 
@@ -92,7 +97,23 @@ def main(argv=None) -> int:
                                                      margin_m=0.0), **kw)  # fmt: skip
     truth = costmap_for_site(map_config=MapConfig(source="truth", margin_m=0.0), **kw)
     bins = trust_table(orbital=orbital, truth=truth, bin_deg=a.bin_deg)
+    trusting = costmap_for_site(map_config=dc.replace(s.ground.map, source="orbital",
+                                                      margin_m=0.0, confirm_slope_deg=0.0),
+                                **kw)  # fmt: skip
+    unconfirmed = orbital.unconfirmed
+    if unconfirmed is None:
+        unconfirmed = np.zeros(orbital.shape, bool)
+
+    def blocked(cm):  # on the grid the ground plans on (ground.hazards.resolution_m)
+        fine = refined_costmap(cm, resolution_m=s.ground.hazards.resolution_m, rover=rover,
+                               hazards=s.ground.hazards)  # fmt: skip
+        return float(np.mean(np.isinf(fine.cost)))
+
     result = {
+        "hazard_fraction": float(np.mean(trusting.lethal_raw)),
+        "unconfirmed_fraction": float(np.mean(unconfirmed)),
+        "blocked_fraction": blocked(orbital),
+        "blocked_trusting_fraction": blocked(trusting),
         "scenario": a.scenario,
         "orbital_resolution_m": orbital.resolution_m,
         "truth_resolution_m": truth.resolution_m,
@@ -107,6 +128,11 @@ def main(argv=None) -> int:
                   f"{r['lethal_fraction']:>13.2f} {r['any_lethal_fraction']:>11.2f}")  # fmt: skip
     print(f"lethal fraction crosses 0.5 at {result['crossing_deg']} deg "
           f"(confirm_slope_deg {result['confirm_slope_deg']:g})")  # fmt: skip
+    pct = {k: 100.0 * v for k, v in result.items() if k.endswith("_fraction")}
+    print(f"orbital cells: {pct['hazard_fraction']:.1f} % hazards, "
+          f"{pct['unconfirmed_fraction']:.1f} % unconfirmed; blocked after inflation: "
+          f"{pct['blocked_fraction']:.1f} % ({pct['blocked_trusting_fraction']:.1f} % "
+          "trusting the orbital map)")  # fmt: skip
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")
     return 0

@@ -498,10 +498,11 @@ def test_steep_orbital_cells_are_lethal_until_stereo_has_seen_them():
     for off in trusting:
         trusted = costmap_for_site(map_config=off, **kw)
         assert trusted.unconfirmed is None and not trusted.lethal_raw.any()
-    # Stereo sees the ramp for x in [1, 5] m, |y| <= 3 m: those cells are confirmed
-    # (stereo's slope, under the limit, judges them); the rest stay unconfirmed.
+    # Stereo sees the ramp for x in [1, 5.5] m, |y| <= 3 m: the cells within x in [1, 5]
+    # are confirmed (stereo's slope, under the limit, judges them); the half-seen ones
+    # (x in [5, 6]) and the rest stay unconfirmed.
     g = np.random.default_rng(7)
-    xy = np.column_stack([g.uniform(1.0, 5.0, 80_000), g.uniform(-3.0, 3.0, 80_000)])
+    xy = np.column_stack([g.uniform(1.0, 5.5, 90_000), g.uniform(-3.0, 3.0, 90_000)])
     pts = np.column_stack([xy, t * xy[:, 0] + g.normal(0.0, 0.005, len(xy))])
     cfg = ElevationMapConfig(min_range_m=0.0)
     em = fuse(ElevationMap.covering(cm), points_W=pts, sensor_origin_W=(0.0, 0.0, 1.5),
@@ -516,6 +517,25 @@ def test_steep_orbital_cells_are_lethal_until_stereo_has_seen_them():
     assert not merged.unconfirmed[seen].any() and not merged.lethal_raw[seen].any()
     np.testing.assert_array_equal(merged.unconfirmed, steep & ~seen)
     np.testing.assert_array_equal(merged.lethal_raw, steep & ~seen)
+    half = (x == 5.5) & (np.abs(y) < 3.0) & steep
+    assert half.sum() == 6 and merged.unconfirmed[half].all()
+    # A rock stereo finds in a cell it has seen only a corner of makes that cell an
+    # ordinary hazard at once: a later, fuller view without the rock does not clear it.
+    cell = cm.cell_of(6.5, 0.5)
+    assert merged.unconfirmed[cell]
+    xa = np.column_stack([g.uniform(6.0, 6.5, 20_000), g.uniform(0.0, 0.5, 20_000)])
+    za = t * xa[:, 0] + np.where(np.hypot(xa[:, 0] - 6.25, xa[:, 1] - 0.25) < 0.15, 0.4, 0.0)
+    ema = fuse(ElevationMap.covering(cm), points_W=np.column_stack([xa, za]),
+               sensor_origin_W=(3.0, 0.0, 1.5), config=cfg)  # fmt: skip
+    hza = stereo_hazards(ema, hazards=hzc, rover=ROVER, config=cfg)
+    ma = merge_into_costmap(merged, stereo=hza, rover=ROVER, hazards=hzc)
+    assert hza.lethal.any() and ma.lethal_raw[cell] and not ma.unconfirmed[cell]
+    xb = np.column_stack([g.uniform(6.0, 7.0, 40_000), g.uniform(0.0, 1.0, 40_000)])
+    emb = fuse(ElevationMap.covering(cm), points_W=np.column_stack([xb, t * xb[:, 0]]),
+               sensor_origin_W=(3.0, 0.0, 1.5), config=cfg)  # fmt: skip
+    hzb = stereo_hazards(emb, hazards=hzc, rover=ROVER, config=cfg)
+    mb = merge_into_costmap(ma, stereo=hzb, rover=ROVER, hazards=hzc)
+    assert not hzb.lethal.any() and mb.lethal_raw[cell] and np.isinf(mb.cost[cell])
     # A steeper ramp seen by stereo (20 deg) is confirmed lethal: stereo's word.
     pts20 = np.column_stack([xy, math.tan(math.radians(20.0)) * xy[:, 0]])
     em20 = fuse(ElevationMap.covering(cm), points_W=pts20, sensor_origin_W=(0.0, 0.0, 1.5),

@@ -21,7 +21,7 @@ max_slope)^2 + roughness_weight (roughness / max_roughness)^2`` per metre; letha
 :func:`orbital_dem` gives the map a mission would have from orbit: the DEM averaged over
 blocks of ``orbital_resolution_m`` (rocks vanish, craters stay) plus seeded noise.
 An orbital map's metre-scale slope hides rover-scale ones: on the default site, 1 m
-cells at 10-12 deg are 48 % lethal at the planning grid, at 12-14 deg 73 %
+cells at 10-12 deg are 51 % lethal at the planning grid, at 12-14 deg 73 %
 (``benchmarks/orbital_trust.py``). So orbital cells steeper than
 ``MapConfig.confirm_slope_deg`` are *unconfirmed*: lethal (``Costmap.unconfirmed``)
 until stereo covers them (:func:`~lunar_drake.perception.elevation_map.
@@ -142,8 +142,10 @@ class RoverEnvelope:
 @dc.dataclass(frozen=True)
 class Costmap:
     """A planning grid. ``cost`` (rows, cols): cost per metre (>= 1; ``inf`` lethal), row
-    0 north; ``slope_deg``, ``step_m``, ``roughness_m`` the layers; ``x0_m``, ``y1_m``:
-    site coordinates of the grid's west and north edges; ``resolution_m``."""
+    0 north; ``slope_deg``, ``step_m``, ``roughness_m`` the layers; ``lethal_raw`` the
+    hazards before inflation, ``unconfirmed`` among them; ``x0_m``, ``y1_m``: site
+    coordinates of the grid's west and north edges; ``resolution_m``; ``unconfirmed``
+    (bool, or None): cells lethal only until stereo has seen them (module docstring)."""
 
     cost: np.ndarray
     slope_deg: np.ndarray

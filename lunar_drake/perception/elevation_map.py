@@ -444,9 +444,10 @@ def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverE
     ``stereo_clears``: planning cells at least ``clear_coverage`` (fraction of their area)
     covered by known cells take stereo's layers and lethality alone, clearing the
     prior's hazards there (off by default: see the module docstring). The prior's
-    *unconfirmed* cells (``costmap.unconfirmed``: steep on the orbital map) are cleared
-    that way always: once ``clear_coverage`` of one is known, stereo's lethality alone
-    judges it and it is no longer unconfirmed."""
+    *unconfirmed* cells (``costmap.unconfirmed``: steep on the orbital map, lethal
+    until seen) are settled by stereo always: once ``clear_coverage`` of one is known,
+    stereo's lethality alone judges it; a stereo hazard in one makes it an ordinary
+    hazard at once (never cleared later). Either way it is no longer unconfirmed."""
     hazards.validate()
     if isinstance(upsample, bool) or not isinstance(upsample, int | np.integer):
         raise ConfigError(f"upsample = {upsample!r} must be an integer")
@@ -487,7 +488,8 @@ def merge_into_costmap(costmap: Costmap, *, stereo: StereoHazards, rover: RoverE
         layers = [np.where(clear, s, p) for p, s in zip(layers, s_layers, strict=True)]
         lethal = np.where(clear, s_lethal, lethal)
     if unconfirmed is not None:
-        confirmed = unconfirmed & clear
+        # Seen well enough, or found lethal by stereo (then a hazard like any other).
+        confirmed = unconfirmed & (clear | s_lethal)
         lethal = np.where(confirmed, s_lethal, lethal)
         unconfirmed = unconfirmed & ~confirmed
     slope, step, rough = layers
