@@ -341,7 +341,8 @@ def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     if not scenario.sensors.nss.enabled:
         return out
     cfg = scenario.sensors.nss
-    table = nss_table(logs.science_received, config=cfg)
+    table = nss_table(logs.science_received, config=cfg,
+                      keyframes=getattr(logs, "keyframes", None) or ())  # fmt: skip
     out["nss_records"] = len(table)
     if not len(table):
         return out

@@ -93,3 +93,30 @@ def test_records_are_averaged_into_site_aligned_cells():
     r, c = int((6.0 - 4.9) // 2), int((-3.1 + 4.0) // 2)
     assert g.mean[0, r, c] == 8.0 and g.count.sum() == 4
     assert np.isnan(g.mean[0][g.count == 0]).all()
+
+
+def test_the_ground_places_records_with_its_vo_correction_interpolated_in_time():
+    from types import SimpleNamespace as NS
+
+    from lunar_drake.comms.science import ScienceRecord
+    from lunar_drake.science.products import ground_xy, nss_table
+
+    # Keyframes at 10 s (shift 1 m east) and 20 s (1 m east, 2 m north, turned 90 deg).
+    kf = [NS(t_capture_s=10.0, correction_x_m=1.0, correction_y_m=0.0, correction_yaw_rad=0.0),
+          NS(t_capture_s=20.0, correction_x_m=1.0, correction_y_m=2.0,
+             correction_yaw_rad=math.pi / 2)]  # fmt: skip
+    x, y = ground_xy([5.0, 15.0, 30.0], [2.0, 2.0, 2.0], [0.0, 0.0, 0.0], kf)
+    # 5 s: the first keyframe's; 15 s: halfway (1, 1, 45 deg); 30 s: the last's.
+    h = math.sqrt(2.0)
+    np.testing.assert_allclose(x, [3.0, 1.0 + h, 1.0], atol=1e-12)
+    np.testing.assert_allclose(y, [0.0, 1.0 + h, 4.0], atol=1e-12)
+    x0, y0 = ground_xy([5.0], [2.0], [3.0])
+    assert x0.tolist() == [2.0] and y0.tolist() == [3.0]
+    recs = [(t + 1.3, ScienceRecord(instrument="nss", index=k, t_sample_s=t, values=(250, 150),
+                                    integration_s=1.0, pose_estimate=(2.0, 0.0, 0, 0, 0, 0)))
+            for k, t in enumerate((5.0, 15.0))]  # fmt: skip
+    tab = nss_table(recs, config=nss.NSSConfig(), keyframes=kf)
+    np.testing.assert_allclose(tab.x_m, [3.0, 1.0 + h], atol=1e-12)
+    np.testing.assert_allclose(tab.y_m, [0.0, 1.0 + h], atol=1e-12)
+    raw = nss_table(recs, config=nss.NSSConfig())
+    assert raw.x_m.tolist() == [2.0, 2.0] and raw.y_m.tolist() == [0.0, 0.0]

@@ -130,8 +130,10 @@ class KeyframeRecord:
     ``off``, ``reason``, ``fitness``, ``inlier_rmse_m``, ``condition``),
     the on-board and VO translations between keyframes (m) and how far they differ
     (``vo_minus_odom_m``), the ground's pose (x, y, yaw; m, rad), its position sigma
-    since the first keyframe (``sigma_m``, per axis) and the lethal cells the map added
-    (``new_lethal``)."""
+    since the first keyframe (``sigma_m``, per axis), the lethal cells the map added
+    (``new_lethal``) and the correction from then on (on-board pose -> ground pose, a
+    planar map ``p' = Rz(yaw) p + (x, y)``: ``correction_x_m``, ``correction_y_m``,
+    ``correction_yaw_rad``)."""
 
     t_capture_s: float
     frame_index: int
@@ -149,6 +151,9 @@ class KeyframeRecord:
     yaw_rad: float
     sigma_m: float
     new_lethal: int
+    correction_x_m: float = 0.0
+    correction_y_m: float = 0.0
+    correction_yaw_rad: float = 0.0
 
 
 @dc.dataclass(frozen=True)
@@ -373,6 +378,8 @@ def perception_step(
             y_m=float(X_WB_ground[1, 3]),
             yaw_rad=math.atan2(X_WB_ground[1, 0], X_WB_ground[0, 0]),
             sigma_m=math.sqrt(var), new_lethal=new_lethal,
+            **dict(zip(("correction_x_m", "correction_y_m", "correction_yaw_rad"),
+                       planar_correction(correction), strict=True)),
         )  # fmt: skip
         s = dc.replace(
             s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,

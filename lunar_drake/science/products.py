@@ -1,7 +1,8 @@
 """Ground science products from the records the downlink delivered (numpy; no Drake).
 
 * :func:`nss_table`: the received NSS records as arrays, placed by the on-board pose
-  estimate they carry, with the ground's water-equivalent hydrogen from the epithermal
+  estimate they carry -- moved by the ground's VO correction when its perception ran
+  (:func:`ground_xy`) -- with the ground's water-equivalent hydrogen from the epithermal
   counts (:func:`~lunar_drake.science.nss.weh_from_epithermal`);
 * :func:`grid_mean`: records averaged into square cells (a heat map);
 * :func:`nss_truth`: scoring only -- the footprint hydrogen of the world model at the
@@ -25,7 +26,8 @@ from lunar_drake.science.nss import NSSConfig, footprint_weh, weh_from_epitherma
 class NSSTable:
     """Received NSS records (arrays of equal length, sample order).
 
-    Attributes: t_sample_s, x_m, y_m (on-board estimate), epithermal, thermal (counts),
+    Attributes: t_sample_s, x_m, y_m (the ground's placing: the on-board estimate, VO
+    corrected when the ground's perception ran), epithermal, thermal (counts),
     integration_s, weh_est (wt%, the ground's inversion).
     """
 
@@ -41,15 +43,34 @@ class NSSTable:
         return int(self.t_sample_s.size)
 
 
-def nss_table(science_received, *, config: NSSConfig) -> NSSTable:
-    """The NSS records of ``science_received`` ((t_received, ScienceRecord) pairs)."""
+def ground_xy(t_s, x_m, y_m, keyframes=()) -> tuple[np.ndarray, np.ndarray]:
+    """On-board positions (site m) at times ``t_s`` (s) where the ground places them:
+    moved by its VO correction (:class:`~lunar_drake.perception.ground_pipeline.
+    KeyframeRecord` ``correction_*``; ``p' = Rz(yaw) p + (x, y)``), interpolated linearly
+    in time between keyframes (drift grows between them: an approximation), the first
+    keyframe's before it, the last one's after it. Without keyframes, unchanged."""
+    t = np.asarray(t_s, np.float64)
+    x, y = np.asarray(x_m, np.float64), np.asarray(y_m, np.float64)
+    if not len(keyframes):
+        return x.copy(), y.copy()
+    tk = np.array([k.t_capture_s for k in keyframes], np.float64)
+    dx, dy = (np.interp(t, tk, [getattr(k, f) for k in keyframes])
+              for f in ("correction_x_m", "correction_y_m"))  # fmt: skip
+    dyaw = np.interp(t, tk, np.unwrap([k.correction_yaw_rad for k in keyframes]))
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    return c * x - s * y + dx, s * x + c * y + dy
+
+
+def nss_table(science_received, *, config: NSSConfig, keyframes=()) -> NSSTable:
+    """The NSS records of ``science_received`` ((t_received, ScienceRecord) pairs),
+    placed where the ground puts them (:func:`ground_xy` with its ``keyframes``)."""
     recs = [r for _t, r in science_received if r.instrument == "nss"]
     if not recs:
         e = np.zeros(0)
         return NSSTable(e, e, e, e, e, e, e)
     t = np.array([r.t_sample_s for r in recs])
-    x = np.array([r.pose_estimate[0] for r in recs])
-    y = np.array([r.pose_estimate[1] for r in recs])
+    x, y = ground_xy(t, [r.pose_estimate[0] for r in recs],
+                     [r.pose_estimate[1] for r in recs], keyframes)  # fmt: skip
     epi = np.array([r.values[0] for r in recs], np.float64)
     th = np.array([r.values[1] for r in recs], np.float64)
     dt = np.array([r.integration_s for r in recs])
@@ -154,7 +175,8 @@ MAPS = {
 
 def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> list:
     """The ground's maps of each instrument along the path, from the records it
-    received placed at the downlinked on-board estimate: ``<stem>.png`` (over the site
+    received placed at the downlinked on-board estimate (VO corrected with the run's
+    keyframes, :func:`ground_xy`): ``<stem>.png`` (over the site
     hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
     one band per quantity, NaN where no record fell). NSS: water-equivalent hydrogen;
     NIRVSS: every band (the PNG shows OH); LCS: temperature. Returns the paths."""
@@ -164,15 +186,17 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
 
     out = Path(out_dir)
     recs = {}
-    nss = nss_table(logs.science_received, config=scenario.sensors.nss)
+    keyframes = getattr(logs, "keyframes", None) or ()
+    nss = nss_table(logs.science_received, config=scenario.sensors.nss, keyframes=keyframes)
     if len(nss):
         recs["nss"] = (nss.x_m, nss.y_m, nss.weh_est)
     nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
     if nir:
-        xy = np.array([r.pose_estimate[:2] for r in nir])
+        nx, ny = ground_xy([r.t_sample_s for r in nir], [r.pose_estimate[0] for r in nir],
+                           [r.pose_estimate[1] for r in nir], keyframes)  # fmt: skip
         vals = np.array([r.values for r in nir])
-        recs["nirvss"] = (xy[:, 0], xy[:, 1], vals[:, :-1])
-        recs["lcs"] = (xy[:, 0], xy[:, 1], vals[:, -1])
+        recs["nirvss"] = (nx, ny, vals[:, :-1])
+        recs["lcs"] = (nx, ny, vals[:, -1])
     paths = []
     for name, (x, y, v) in recs.items():
         grid = grid_records(x, y, v, cell_m=cell_m)
@@ -245,6 +269,7 @@ __all__ = [
     "NSSTable",
     "grid_mean",
     "grid_records",
+    "ground_xy",
     "nss_table",
     "nss_truth",
     "science_maps",
