@@ -239,6 +239,13 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
     ground = corrected_pose(est1, planar_correction(st.correction))
     err_ground = math.hypot(ground[0] - 0.8, ground[1])
     assert err_ground < 0.05 < 0.2 == pytest.approx(math.hypot(est1[0] - 0.8, est1[1]))
+    # Each record carries the correction from then on; the ground pose it lists is the
+    # on-board one moved by it.
+    assert (first.correction_x_m, first.correction_y_m, first.correction_yaw_rad) == (0, 0, 0)
+    corr = (rec.correction_x_m, rec.correction_y_m, rec.correction_yaw_rad)
+    assert corr == planar_correction(st.correction)
+    moved = corrected_pose(est1, corr)
+    assert moved[[0, 1, 5]] == pytest.approx([rec.x_m, rec.y_m, rec.yaw_rad], abs=1e-9)
     # with a tight on-board sigma the 0.2 m shortfall is still fused (slip: wheels
     # over-read), but 0.2 m sideways, which slip cannot explain, is beyond the gate
     tight = dc.replace(cfg, odom_sigma_fraction=0.02)
