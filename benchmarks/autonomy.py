@@ -2,14 +2,15 @@
 
     .venv/bin/python benchmarks/autonomy.py --map truth --goals 10 --workers 2 \\
         --runs runs/autonomy_truth --out bench_autonomy_truth.json
-    .venv/bin/python benchmarks/autonomy.py --map orbital --goals 10 --runs runs/autonomy_orbital \\
-        --out bench_autonomy_orbital.json
+    .venv/bin/python benchmarks/autonomy.py --map orbital --goals 10 --workers 2 \\
+        --runs runs/autonomy_orbital --out bench_autonomy_orbital.json
 
 N goals are drawn (seeded) 30-60 m from the scenario's spawn point, each free and
 reachable on the *true* costmap (the site DEM with rocks). Each goal is its own mission
-(the scenario with ``ground.goals: [goal]``, the ground's map ``--map``, cameras off;
-with ``--stereo`` the cameras on, frames sent down and the ground's stereo perception
-mapping hazards into its costmap and replanning,
+(the scenario with ``ground.goals: [goal]``, the ground's map ``--map``; with
+``--stereo`` -- the default with ``--map orbital``, which lost the rocks -- the cameras
+on, frames sent down and the ground's stereo perception mapping hazards into its costmap
+and replanning; with ``--no-stereo`` -- the default with ``--map truth`` -- cameras off;
 time for three times the straight-line distance at the drive speed plus two minutes,
 ending 20 s after the ground has judged the goal reached or failed),
 written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
@@ -125,11 +126,14 @@ def main(argv=None) -> int:
     p.add_argument("--goals", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--stereo", action="store_true",
-                   help="cameras on: stereo hazards from the downlinked frames")  # fmt: skip
+    p.add_argument("--stereo", action=argparse.BooleanOptionalAction, default=None,
+                   help="cameras on: stereo hazards from the downlinked frames (default: "
+                        "on with --map orbital, off with --map truth)")  # fmt: skip
     p.add_argument("--runs", required=True, help="directory for the run directories")
     p.add_argument("--out", default=None, help="write results as JSON here")
     a = p.parse_args(argv)
+    if a.stereo is None:
+        a.stereo = a.map == "orbital"
     if a.out:
         check_output_file(a.out, what="results JSON")
 
