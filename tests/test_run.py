@@ -237,6 +237,7 @@ def test_ctrl_c_inside_a_system_callback_is_an_interrupt(small_site):
 
     scenario, site = small_site
     scenario = apply_overrides(scenario, "{sensors: {camera: {enabled: false}}}")
+    before = signal.getsignal(signal.SIGINT)  # SIG_IGN when started in the background
 
     def interrupt(t, pose):
         try:
@@ -253,7 +254,7 @@ def test_ctrl_c_inside_a_system_callback_is_an_interrupt(small_site):
             stop_when=interrupt,
             stop_check_period_s=0.05,
         )
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before
 
 
 def test_ctrl_c_swallowed_before_the_simulation_still_stops_it(small_site):
@@ -265,6 +266,7 @@ def test_ctrl_c_swallowed_before_the_simulation_still_stops_it(small_site):
 
     scenario, site = small_site
     scenario = apply_overrides(scenario, "{sensors: {camera: {enabled: false}}}")
+    before = signal.getsignal(signal.SIGINT)
     owner = interrupts.LatchedSigint()  # what cli.main installs
     try:
         try:
@@ -279,7 +281,7 @@ def test_ctrl_c_swallowed_before_the_simulation_still_stops_it(small_site):
     finally:
         owner.restore()
     assert not interrupts.requested()
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGINT) is before
     # A later library run is not affected.
     logs = simulate(scenario=apply_overrides(scenario, "{simulation_duration: 0.1}"), site=site,
                     progress=False)  # fmt: skip
