@@ -303,10 +303,14 @@ def _cmd_plan(args) -> int:
     doc = run_plan(
         scenario=scenario, site=site, goal_xy=args.goal, start_xy=args.start, out_dir=args.out
     )
+    unconfirmed = ""
+    if doc["unconfirmed_fraction"]:
+        unconfirmed = (f" ({100 * doc['unconfirmed_fraction']:.1f}% unconfirmed: steeper than "
+                       f"{doc['confirm_slope_deg']:g} deg on the orbital map)")  # fmt: skip
     print(
-        f"Path on the {doc['map']} map: {doc['length_m']:.1f} m (straight line "
+        f"Path on the {doc['map']} map: {doc['waypoint_length_m']:.1f} m (straight line "
         f"{doc['straight_line_m']:.1f} m), {doc['waypoints']} waypoints; "
-        f"{100 * doc['lethal_fraction']:.1f}% of the map is hazard"
+        f"{100 * doc['lethal_fraction']:.1f}% of the map is hazard{unconfirmed}"
     )
     print(f"Outputs: {Path(args.out).resolve()} (plan.png, path.csv, plan.json)")
     return 0

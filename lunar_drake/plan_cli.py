@@ -17,7 +17,9 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
     """Plans on the scenario's ground map (``ground.map``, ``ground.hazards``) from
     ``start_xy`` (default: the rover's spawn point) to ``goal_xy`` (site m) and writes
     ``plan.png`` (costmap, lethal cells, path), ``path.csv`` (``x_m,y_m`` waypoints) and
-    ``plan.json``; returns the plan.json dict. Raises ``OutOfBoundsError`` /
+    ``plan.json`` (``length_m``: along the planning grid's cells; ``waypoint_length_m``:
+    the waypoints the rover follows; ``unconfirmed_fraction``: the orbital map's steep
+    cells, lethal until stereo sees them); returns the plan.json dict. Raises ``OutOfBoundsError`` /
     ``PlanningError`` (one line) for goals off the map, in a hazard or unreachable."""
     from matplotlib.figure import Figure
 
@@ -36,24 +38,34 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
     lines = ["x_m,y_m"] + [f"{x:.4f},{y:.4f}" for x, y in path.waypoints_xy]
     atomic_write_text(out / "path.csv", "\n".join(lines) + "\n", what="path table")
     lethal = ~np.isfinite(cm.cost)
+    wp = np.asarray(path.waypoints_xy)
+    unconfirmed = 0.0 if cm.unconfirmed is None else float(np.mean(cm.unconfirmed))
     doc = {
         "scenario": scenario.name,
         "map": scenario.ground.map.source,
         "start_xy_m": [float(v) for v in start],
         "goal_xy_m": [float(v) for v in goal_xy],
         "length_m": round(path.length_m, 3),
+        "waypoint_length_m": round(float(np.sum(np.hypot(*np.diff(wp, axis=0).T))), 3),
         "straight_line_m": round(float(np.hypot(*(np.subtract(goal_xy, start)))), 3),
         "cost": round(path.cost, 3),
         "waypoints": len(path.waypoints_xy),
         "grid": {"shape": list(cm.shape), "resolution_m": cm.resolution_m},
         "lethal_fraction": round(float(lethal.mean()), 4),
+        "unconfirmed_fraction": round(unconfirmed, 4),
+        "confirm_slope_deg": (scenario.ground.map.confirm_slope_deg
+                              if scenario.ground.map.source == "orbital" else None),
         "footprint_radius_m": round(rover.footprint_radius_m, 3),
     }
     atomic_write_text(out / "plan.json", json.dumps(doc, indent=2) + "\n", what="plan summary")
     fig = Figure(figsize=(7, 7))
     ax = fig.subplots()
+    key = "red: hazards, inflated"
+    if unconfirmed > 0.0:
+        key += (f";\npurple: steeper than {doc['confirm_slope_deg']:g} deg, lethal until "
+                "stereo sees it")  # fmt: skip
     plot_plan(cm, path, ax=ax, title=f"{scenario.name}: {doc['map']} map, "
-              f"{doc['length_m']:.1f} m path (red: hazards, inflated)")  # fmt: skip
+              f"{doc['waypoint_length_m']:.1f} m path ({key})")  # fmt: skip
     fig.tight_layout()
     with atomic_path(Path(out) / "plan.png", what="plot") as tmp:
         fig.savefig(tmp, dpi=110)

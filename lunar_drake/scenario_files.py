@@ -20,6 +20,7 @@ written ``scenario.yaml`` holds absolute paths.
 from __future__ import annotations
 
 import dataclasses as dc
+import re
 import typing
 from importlib import resources
 from pathlib import Path
@@ -82,10 +83,34 @@ def _schema_fields(schema) -> dict | None:
     return None
 
 
+_YAML_FLOATS = {".nan", ".inf", "+.inf", "-.inf"}
+
+
+def _check_scalar(node, schema, path: str, source: str) -> None:
+    """Raises ConfigError, naming ``path``, for a scalar that is not a number where
+    ``schema`` (float or int) wants one."""
+    if schema not in (float, int) or not isinstance(node, yaml.ScalarNode):
+        return
+    text = str(node.value).strip()
+    if schema is int:
+        ok = re.fullmatch(r"[-+]?(\d+|0[xX][0-9a-fA-F]+|0[oO][0-7]+)", text) is not None
+    else:
+        try:
+            float(text)
+            ok = True
+        except ValueError:
+            ok = text.lower() in _YAML_FLOATS
+    if not ok:
+        kind = "an integer" if schema is int else "a number"
+        raise ConfigError(f"{_where(source, node)}: {path} = {node.value!r} must be {kind}")
+
+
 def _check_keys(node, schema, path: str, source: str) -> None:
-    """Raises ConfigError for the first mapping key that ``schema`` does not have."""
+    """Raises ConfigError for the first mapping key that ``schema`` does not have, or
+    the first scalar that is not a number where one is wanted."""
     fields = _schema_fields(schema)
     if fields is None:
+        _check_scalar(node, schema, path, source)
         origin = typing.get_origin(schema)
         if origin is list and isinstance(node, yaml.SequenceNode):
             (item,) = typing.get_args(schema)

@@ -137,6 +137,32 @@ def test_unknown_keys_are_named_with_their_full_path(text, key):
         load_scenario(scenario_text=text)
 
 
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("{ground: {map: {confirm_slope_deg: abc}}}",
+         "ground.map.confirm_slope_deg = 'abc' must be a number"),
+        ("{random_seed: 1.5}", "random_seed = '1.5' must be an integer"),
+        ("{ground: {route: [{duration_s: soon}]}}",
+         r"ground.route\[0\].duration_s = 'soon' must be a number"),
+        ("{sensors: {camera: {width: wide}}}", "sensors.camera.width = 'wide' must be an integer"),
+    ],
+)  # fmt: skip
+def test_a_value_that_is_not_a_number_is_named_with_its_path(text, message):
+    with pytest.raises(ConfigError, match=r"--scenario-text, line 1: " + message):
+        load_scenario(scenario_text=text)
+
+
+@pytest.mark.parametrize("value", ["1e-3", "12", ".nan", "-.inf", "7.5"])
+def test_numbers_yaml_writes_in_any_form_pass_the_number_check(value):
+    from lunar_drake.errors import OutOfRangeError
+
+    try:
+        load_scenario(scenario_text=f"{{ground: {{map: {{confirm_slope_deg: {value}}}}}}}")
+    except OutOfRangeError as exc:  # .nan / -.inf: a number, out of range
+        assert "confirm_slope_deg" in str(exc) and value in (".nan", "-.inf")
+
+
 def test_unknown_key_in_a_file_names_the_file_and_line(tmp_path):
     f = tmp_path / "mine.yaml"
     f.write_text("mission:\n  rover:\n    description:\n      wheel_radius: 0.3\n")

@@ -114,7 +114,8 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
             if costmap.unconfirmed is not None and costmap.unconfirmed[g]:
                 why = (
                     f"slope {costmap.slope_deg[g]:.1f} deg on the orbital map, over "
-                    "ground.map.confirm_slope_deg: lethal until stereo has seen it"
+                    "ground.map.confirm_slope_deg: lethal until stereo has seen it; choose "
+                    "another goal, or set confirm_slope_deg: 0 to trust the orbital map"
                 )
             raise PlanningError(
                 f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
@@ -207,7 +208,8 @@ def plot_plan(costmap: Costmap, path: Path | None, *, ax, title: str = "") -> No
     res = costmap.resolution_m
     extent = (costmap.x0_m, costmap.x0_m + cols * res, costmap.y1_m - rows * res, costmap.y1_m)
     finite = np.where(np.isfinite(costmap.cost), costmap.cost, np.nan)
-    ax.imshow(finite, extent=extent, cmap="Greys", origin="upper")
+    im = ax.imshow(finite, extent=extent, cmap="Greys", origin="upper")
+    ax.figure.colorbar(im, ax=ax, shrink=0.8, label="cost per metre (free cells)")
     lethal = np.ma.masked_where(np.isfinite(costmap.cost), np.ones(costmap.shape))
     ax.imshow(lethal, extent=extent, cmap="autumn", origin="upper", alpha=0.6)
     draw_unconfirmed(ax, costmap.unconfirmed, extent=extent)
