@@ -162,6 +162,11 @@ def test_plan_command_writes_the_plot_path_and_summary(small_site, tmp_path, cap
 
     doc = json.loads((out / "plan.json").read_text())
     assert doc["map"] == "truth" and doc["length_m"] >= doc["straight_line_m"]
+    wp = np.array([[float(v) for v in r.split(",")] for r in rows[1:]])
+    assert doc["waypoint_length_m"] == pytest.approx(
+        np.sum(np.hypot(*np.diff(wp, axis=0).T)), abs=1e-3)
+    assert doc["waypoint_length_m"] >= doc["straight_line_m"] - 1e-3
+    assert doc["unconfirmed_fraction"] == 0.0 and doc["confirm_slope_deg"] is None
     capsys.readouterr()
     # Bad goals: one line, exit 2, nothing written.
     assert main([*args[:-2], "80", "0", "--out", str(tmp_path / "q")]) == 2
@@ -169,7 +174,9 @@ def test_plan_command_writes_the_plot_path_and_summary(small_site, tmp_path, cap
     assert "OutOfBoundsError" in err and "off the map" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "q").exists()
     assert main([*args, "--map", "orbital", "--out", str(tmp_path / "o")]) == 0
-    assert json.loads((tmp_path / "o" / "plan.json").read_text())["map"] == "orbital"
+    orb = json.loads((tmp_path / "o" / "plan.json").read_text())
+    assert orb["map"] == "orbital" and orb["confirm_slope_deg"] == 11.0
+    assert 0.0 <= orb["unconfirmed_fraction"] <= orb["lethal_fraction"]
 
 
 def test_nan_and_off_site_points_are_clear_errors(small_site):
