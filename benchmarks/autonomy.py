@@ -203,4 +203,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks import run_main
+
+    run_main(main, "autonomy.py")

@@ -25,6 +25,7 @@ import argparse
 import itertools
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -77,6 +78,8 @@ def main(argv=None) -> int:
     p.add_argument("--bin-deg", type=float, default=2.0)
     p.add_argument("--out", default=None, help="write results as JSON here")
     a = p.parse_args(argv)
+    if not 0.0 < a.bin_deg <= 90.0:  # NaN fails too
+        p.error(f"--bin-deg = {a.bin_deg!r} deg; allowed (0, 90]")
     if a.out:
         check_output_file(a.out, what="results JSON")
     import dataclasses as dc
@@ -139,4 +142,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks import run_main
+
+    run_main(main, "orbital_trust.py")

@@ -196,10 +196,7 @@ def _write_images(out: Path, stem: str, preview, res, depth) -> None:
 
 
 if __name__ == "__main__":
-    from lunar_drake.errors import LunarDrakeError
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks import run_main
 
-    try:
-        sys.exit(main())
-    except LunarDrakeError as exc:
-        print(f"stereo.py: error: {type(exc).__name__}: {exc}", file=sys.stderr)
-        sys.exit(2)
+    run_main(main, "stereo.py")
