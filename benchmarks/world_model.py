@@ -8,7 +8,10 @@ synth``, cached under ``--cache``; not timed), then ``lunar-drake world build`` 
 a child process: ``seconds`` is its wall time and ``peak_rss_mb`` its peak resident
 memory (``getrusage`` of the child); ``stage_seconds`` comes from the build's
 ``world.json``. Goals (issue 15): 8192^2 in <= 60 s and <= 4 GB; 30720^2 within 15
-minutes and 4 GB. Prints a table; writes JSON with --out.
+minutes and 4 GB. Sites above 80 Mpx build out of core (illumination strips with a
+decimated far field, :mod:`lunar_drake.science.strips`); ``--strip-px N`` forces that
+at any size. ``--compress zstd`` compresses the GeoTIFFs (a 30720^2 stack is 50 GB
+uncompressed). Prints a table; writes JSON with --out.
 """
 
 from __future__ import annotations
@@ -44,6 +47,12 @@ def main(argv=None) -> int:
     p.add_argument("--resolution", type=float, default=0.04, help="pixel (m)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--strip-px", type=int, default=0,
+                   help="build out of core whatever the size, illumination strips of this "
+                        "many rows (ThermalConfig.strip_px; default: out of core above "
+                        "ThermalConfig.whole_max_mpx, 80 Mpx)")  # fmt: skip
+    p.add_argument("--compress", default="none", choices=("none", "zstd", "deflate", "lzw"),
+                   help="the GeoTIFFs' compression (WorldConfig.compress)")  # fmt: skip
     p.add_argument("--cache", default=str(Path(tempfile.gettempdir()) / "lunar_drake_bench"),
                    help="where synthesized sites are kept")  # fmt: skip
     p.add_argument("--out", default=None, help="write results as JSON here")
@@ -54,8 +63,14 @@ def main(argv=None) -> int:
     cache.mkdir(parents=True, exist_ok=True)
     site = site_for(args.size, args.resolution, args.seed, cache)
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
+        out = Path(tmp) / "world"
         cmd = [sys.executable, "-m", "lunar_drake.cli", "world", "build", str(site),
-               "--out", tmp, "--workers", str(args.workers), "--no-progress"]  # fmt: skip
+               "--out", str(out), "--workers", str(args.workers), "--no-progress"]  # fmt: skip
+        if args.strip_px or args.compress != "none":
+            cfg = Path(tmp) / "config.yaml"
+            th = f"{{strip_px: {args.strip_px}, whole_max_mpx: 0}}" if args.strip_px else "{}"
+            cfg.write_text(f"thermal: {th}\ncompress: {args.compress}\n")
+            cmd += ["--config", str(cfg)]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True)
         seconds = time.perf_counter() - t0
@@ -63,7 +78,8 @@ def main(argv=None) -> int:
             print(proc.stderr, file=sys.stderr)
             return proc.returncode
         peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        world = json.loads((Path(tmp) / "world.json").read_text())
+        world = json.loads((out / "world.json").read_text())
+        output_bytes = sum(f.stat().st_size for f in out.iterdir())
     doc = {
         "size": args.size,
         "resolution_m": args.resolution,
@@ -72,6 +88,9 @@ def main(argv=None) -> int:
         "psr_fraction": world["psr_fraction"],
         "stage_seconds": world.get("stage_seconds", {}),
         "workers": args.workers,
+        "strip_px": args.strip_px,
+        "compress": args.compress,
+        "output_gb": round(output_bytes / 1e9, 3),
         "machine": platform.platform(),
     }
     print(f"{'size':>8} {'pixel m':>8} {'seconds':>9} {'peak MB':>9} {'PSR %':>7}")

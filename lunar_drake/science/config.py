@@ -71,6 +71,14 @@ class ThermalConfig:
         view_max_deg: horizons are resolved up to this elevation (deg), (0, 80].
         view_resolution_m: the DEM is block-averaged to about this pixel for the view
             factor (m), >= 0 (0: the DEM's own).
+        whole_max_mpx: DEMs of at most this many megapixels are held and swept whole
+            (exact to the hull sweep; about 45 bytes a pixel: 3 GB at 8192^2), (>= 0).
+            Larger ones are built out of core: read a strip of rows at a time, terrain
+            beyond ``near_field_m`` from a decimated copy (:mod:`.strips`).
+        strip_px: rows of each illumination strip out of core (px), [16, 2^20].
+        near_field_m: with strips, terrain at least this far around a strip is swept at
+            full resolution (m), (0, 1e4].
+        far_cell_m: with strips, the pixel of the decimated DEM beyond (m), (0, 100].
     """
 
     bond_albedo: float = 0.12
@@ -81,6 +89,10 @@ class ThermalConfig:
     view_azimuths: int = 8
     view_max_deg: float = 40.0
     view_resolution_m: float = 0.5
+    whole_max_mpx: float = 80.0
+    strip_px: int = 1024
+    near_field_m: float = 10.0
+    far_cell_m: float = 0.64
 
     def validate(self) -> None:
         check_range("bond_albedo", self.bond_albedo, 0.0, 1.0, hi_open=True)
@@ -93,6 +105,14 @@ class ThermalConfig:
         _int_range("view_azimuths", self.view_azimuths, 4, 64)
         check_range("view_max_deg", self.view_max_deg, 0.0, 80.0, lo_open=True, unit=" deg")
         check_range("view_resolution_m", self.view_resolution_m, 0.0, 1e3, unit=" m")
+        check_range("whole_max_mpx", self.whole_max_mpx, 0.0, 1e6, unit=" Mpx")
+        _int_range("strip_px", self.strip_px, 16, 1 << 20)
+        check_range("near_field_m", self.near_field_m, 0.0, 1e4, lo_open=True, unit=" m")
+        check_range("far_cell_m", self.far_cell_m, 0.0, 100.0, lo_open=True, unit=" m")
+
+    def out_of_core(self, shape) -> bool:
+        """Whether a DEM of ``shape`` is built strip by strip (``whole_max_mpx``)."""
+        return int(shape[0]) * int(shape[1]) > self.whole_max_mpx * 1e6
 
 
 @dc.dataclass
@@ -254,6 +274,8 @@ class WorldConfig:
         sun, thermal, frost, oh, ice, minerals: one section per layer (see each).
         tile_px: tile edge of the lazy computation (px), [64, 16384]; never changes a byte.
         workers: threads (-), [1, 64].
+        compress: the GeoTIFFs' compression: ``none``, ``zstd``, ``deflate`` or ``lzw``
+            (lossless, with a predictor; ``zstd`` halves a 30720^2 stack's 50 GB).
     """
 
     sun: SunEnvelopeConfig = dc.field(default_factory=SunEnvelopeConfig)
@@ -264,6 +286,7 @@ class WorldConfig:
     minerals: MineralConfig = dc.field(default_factory=MineralConfig)
     tile_px: int = 2048
     workers: int = 2
+    compress: str = "none"
 
     def validate(self) -> None:
         """Raises the section's error, its message prefixed with the section's name."""
@@ -274,6 +297,10 @@ class WorldConfig:
                 raise type(exc)(f"{name}.{exc}") from None
         _int_range("tile_px", self.tile_px, 64, 16384)
         _int_range("workers", self.workers, 1, 64)
+        if self.compress not in ("none", "zstd", "deflate", "lzw"):
+            raise ConfigError(
+                f"compress = {self.compress!r} is unknown; allowed: none, zstd, deflate, lzw"
+            )
 
 
 def _int_range(name: str, value, lo: int, hi: int) -> None:

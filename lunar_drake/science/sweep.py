@@ -52,8 +52,9 @@ NO_CASTER = -1.0e6
 _HALF_NO = 0.5 * NO_CASTER
 
 #: Pixel operations of :func:`_sweep`: the horizon tangent; a sector's sunlight
-#: (highest and mean flux, ever lit); the epoch's (lit fraction and flux).
-TANGENT, SECTOR, EPOCH = 0, 1, 2
+#: (highest and mean flux, ever lit); the epoch's (lit fraction and flux); the far
+#: field alone (its tangent from the pixel's height and 1 / its distance, 1/m).
+TANGENT, SECTOR, EPOCH, FAR = 0, 1, 2, 3
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -266,17 +267,17 @@ def _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit):  # pragma: no co
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _line(zc, k, s, w, x, inv_r, near, hx, hz, zl, vx, vz):  # pragma: no cover - numba
-    """The far-field horizon of line ``k`` at every column ``c``: the hull vertex steepest
-    from the line's own sample at ``c`` among its samples at columns ``<= c - near``,
-    as ``(vx, vz)`` in ``(x, zhat)`` (``vx = NaN`` when there is none). ``hx, hz`` hold
-    the hull and ``zl`` the line's heights (scratch)."""
-    nc = zc.shape[1]
+def _line(zc, k, s, w, x, inv_r, near, c_start, c_end, hx, hz, zl, vx, vz):  # pragma: no cover
+    """The far-field horizon of line ``k`` at every column ``c`` of ``[c_start, c_end)``
+    (the columns where it lies on the grid, or a prefix of them): the hull vertex
+    steepest from the line's own sample at ``c`` among its samples at columns
+    ``<= c - near``, as ``(vx, vz)`` in ``(x, zhat)`` (``vx = NaN`` when there is none).
+    ``hx, hz`` hold the hull and ``zl`` the line's heights (scratch)."""
     n, j = 0, 0
-    for c in range(nc):
+    for c in range(c_start, c_end):
         zl[c] = _line_height(zc, k, c, s, w, x, inv_r)
         cd = c - near
-        if cd >= 0 and not np.isnan(zl[cd]):
+        if cd >= c_start and not np.isnan(zl[cd]):
             n = _push(hx, hz, n, x[cd], zl[cd])
         zh = zl[c]
         if n == 0 or np.isnan(zh):
@@ -302,24 +303,32 @@ def _columns(s, lo, hi):  # pragma: no cover - numba
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode, par, lev, acc_a,
-           acc_b, acc_lit):  # fmt: skip  # pragma: no cover - numba
+           acc_b, acc_lit, tfar, region):  # fmt: skip  # pragma: no cover - numba
     """Runs the hull sweep over the pixels between lines ``k_min..k_max`` of canonical
-    DEM ``zc`` and applies ``_pixel`` to each (see the module docstring)."""
+    DEM ``zc`` and applies ``_pixel`` to each (see the module docstring) inside
+    ``region`` = ``(R0, R1, C0, C1)`` (canonical); ``tfar`` (canonical, or empty): a
+    further horizon tangent per pixel, from terrain the DEM does not hold."""
     nr, nc = zc.shape
     step_m = x[1] - x[0] if nc > 1 else 1.0
     reach = near + 2
+    R0, R1, C0, C1 = region[0], region[1], region[2], region[3]
+    has_far = tfar.shape[0] > 0
     n_chunks = (k_max - k_min + chunk - 1) // chunk
     for ci in numba.prange(n_chunks):
         k0 = k_min + ci * chunk
         k1 = min(k0 + chunk, k_max)
         hx, hz, zl = np.empty(nc), np.empty(nc), np.empty(nc)
         ax, az, bx, bz = np.empty(nc), np.empty(nc), np.empty(nc), np.empty(nc)
-        _line(zc, k0, s, w, x, inv_r, near, hx, hz, zl, ax, az)
+        l0, l1 = _columns(s, k0 - nr, k0)
+        _line(zc, k0, s, w, x, inv_r, near, l0, min(l1, C1), hx, hz, zl, ax, az)
         for k in range(k0, k1):  # the pixels between lines k and k + 1
-            _line(zc, k + 1, s, w, x, inv_r, near, hx, hz, zl, bx, bz)
+            l0, l1 = _columns(s, k + 1 - nr, k + 1)
+            _line(zc, k + 1, s, w, x, inv_r, near, l0, min(l1, C1), hx, hz, zl, bx, bz)
             c_lo, c_hi = _columns(s, k - nr + 1, k)
-            for c in range(c_lo, c_hi):
+            for c in range(max(c_lo, C0), min(c_hi, C1)):
                 r = k - s[c]
+                if r < R0 or r >= R1:
+                    continue
                 xc = x[c]
                 zp = zc[r, c] - 0.5 * xc * xc * inv_r
                 wc = w[c]
@@ -327,14 +336,26 @@ def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode,
                 ta = NO_CASTER if np.isnan(ax[c]) else (az[c] - zp) / (xc - ax[c])
                 if wc == 0.0:
                     t = ta
+                    d = xc - ax[c]
                 else:
                     tb = NO_CASTER if np.isnan(bx[c]) else (bz[c] - zp) / (xc - bx[c])
                     if ta > _HALF_NO and tb > _HALF_NO:
                         t = (1.0 - wc) * ta + wc * tb
-                    else:  # at the grid's edge or the start of a line: the one that sees
-                        t = max(ta, tb)
+                        d = (1.0 - wc) * (xc - ax[c]) + wc * (xc - bx[c])
+                    elif ta >= tb:  # at the grid's edge or the start of a line: the one
+                        t = ta  # that sees
+                        d = xc - ax[c]
+                    else:
+                        t = tb
+                        d = xc - bx[c]
                 if t > _HALF_NO:
                     t -= xc * inv_r
+                if mode == FAR:
+                    acc_a[r, c] = t
+                    acc_b[r, c] = 1.0 / d if t > _HALF_NO else 0.0
+                    continue
+                if has_far and tfar[r, c] > t:
+                    t = tfar[r, c]
                 if mode == TANGENT or t < lev[4, 0]:  # else dark at every level already
                     t = max(t, _near(zc, r, c, sigma, step_m, p_i, p_f, reach))
                 _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit)
@@ -394,35 +415,50 @@ class Sweep:
         self.plan_i = np.ascontiguousarray(plan[:, :2].astype(np.int64))
         self.plan_f = np.ascontiguousarray(plan[:, 2:])
 
-    def run(self, mode, par, elevations_deg, acc_a, acc_b, acc_lit) -> None:
+    def run(self, mode, par, elevations_deg, acc_a, acc_b, acc_lit, *, tfar=None,
+            region=None, extent_px=None) -> None:  # fmt: skip
         """Applies pixel operation ``mode`` with canonical accumulators, at the Sun
-        ``elevations_deg`` (sector: its highest first, then its mean levels)."""
+        ``elevations_deg`` (sector: its highest first, then its mean levels).
+
+        ``tfar``: a further horizon tangent per canonical pixel (terrain beyond this
+        DEM). ``region``: canonical ``(R0, R1, C0, C1)``, the only pixels computed
+        (default all). ``extent_px``: ``(rows, cols)`` of the whole grid when this DEM
+        is a window of it (bounds the Sun's tilt over it; default this DEM's).
+        """
         e = np.radians(np.asarray(elevations_deg, np.float64).ravel())
         nr, nc = self.orient.shape
         # The largest Sun tilt over the grid (rad): half its diagonal over R.
-        bound = 0.5 * math.hypot(nr, nc) * self.resolution_m * self.inv_r
+        ext = (nr, nc) if extent_px is None else extent_px
+        bound = 0.5 * math.hypot(*ext) * self.resolution_m * self.inv_r
         radius = float(par[8]) if len(par) > 8 else 0.0
         cap = 0.5 * math.pi - 1e-6
         lo = np.tan(np.clip(e - radius - bound, -cap, cap))
         hi = np.tan(np.clip(e + radius + bound, -cap, cap))
         lev = np.ascontiguousarray(np.stack([e, np.sin(e), np.cos(e), lo, hi, np.tan(e)]))
+        R0, R1, C0, C1 = (0, nr, 0, nc) if region is None else (int(v) for v in region)
+        k_min = max(self.k_min, R0 + int(self.s[C0:C1].min()) if C1 > C0 else self.k_max)
+        k_max = min(self.k_max, R1 + int(self.s[C0:C1].max()) if C1 > C0 else self.k_min)
+        far = np.zeros((0, 0), np.float32) if tfar is None else tfar
         # Chunks differ in work (lines near the corners are short): hand them out one
         # at a time.
         with numba.parallel_chunksize(1):
             _sweep(self.zc, self.s, self.w, self.x, self.inv_r, self.orient.sigma, self.near,
-                   self.plan_i, self.plan_f, self.k_min, self.k_max, self.chunk, mode,
-                   np.asarray(par, np.float64), lev, acc_a, acc_b, acc_lit)  # fmt: skip
+                   self.plan_i, self.plan_f, k_min, max(k_min, k_max), self.chunk, mode,
+                   np.asarray(par, np.float64), lev, acc_a, acc_b, acc_lit, far,
+                   np.array([R0, R1, C0, C1], np.int64))  # fmt: skip
 
     def sun_par(self, *, flux_w_m2: float, mask_deg: float, radius_deg: float,
-                w_mean: float = 0.0) -> np.ndarray:  # fmt: skip
+                w_mean: float = 0.0, centre=None) -> np.ndarray:  # fmt: skip
         """``par`` of the Sun along this azimuth: the horizontal unit towards it
-        (canonical axes), the resolution, the grid centre, 1/R, the flux, the outside
-        horizon, the disk's radius, the weight of each mean level and 1 / pixel."""
+        (canonical axes), the resolution, the grid centre (canonical ``(R, C)``, default
+        this DEM's), 1/R, the flux, the outside horizon, the disk's radius, the weight
+        of each mean level and 1 / pixel."""
         o = self.orient
         nr, nc = o.shape
+        cr, cc = (0.5 * (nr - 1), 0.5 * (nc - 1)) if centre is None else centre
         return np.array([
             o.sigma / o.step_px, -1.0 / o.step_px, self.resolution_m,
-            0.5 * (nr - 1), 0.5 * (nc - 1), self.inv_r, float(flux_w_m2),
+            float(cr), float(cc), self.inv_r, float(flux_w_m2),
             math.radians(mask_deg), math.radians(radius_deg), float(w_mean),
             1.0 / self.resolution_m,
         ])  # fmt: skip
@@ -450,6 +486,7 @@ def horizon_tangents(z: np.ndarray, *, azimuth_deg: float, resolution_m: float,
 
 __all__ = [
     "EPOCH",
+    "FAR",
     "NO_CASTER",
     "SECTOR",
     "TANGENT",

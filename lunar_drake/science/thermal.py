@@ -91,6 +91,28 @@ def _mask_deg(mask: HorizonMask | None, azimuth_deg: float) -> float:
     return float(mask.elevation_deg(azimuth_deg))
 
 
+def sweep_jobs(envelope: SunEnvelope, *, sun_azimuth_deg: float, sun_elevation_deg: float,
+               sun_distance_au: float, config: ThermalConfig,
+               horizon_mask: HorizonMask | None) -> list:  # fmt: skip
+    """The sweeps of :func:`illumination`: ``(azimuth_deg, elevations_deg, absorbed flux
+    W/m^2, weight of each mean level, epoch?)`` per sector the Sun clears the outside
+    horizon in, then the epoch's."""
+    r = SUN_ANGULAR_RADIUS_DEG
+    absorb = 1.0 - config.bond_albedo
+    jobs = []
+    for b in range(envelope.azimuth_deg.size):
+        az = float(envelope.azimuth_deg[b])
+        if envelope.weight[b] <= 0 or envelope.el_max_deg[b] + r <= _mask_deg(horizon_mask, az):
+            continue
+        levels = [float(e) for e in envelope.el_levels_deg[b]]
+        flux = absorb * config.solar_constant_w_m2 / float(envelope.distance_au[b]) ** 2
+        w = float(envelope.weight[b]) / len(levels)
+        jobs.append((az, [float(envelope.el_max_deg[b]), *levels], flux, w, False))
+    flux_now = absorb * config.solar_constant_w_m2 / float(sun_distance_au) ** 2
+    jobs.append((float(sun_azimuth_deg) % 360.0, [float(sun_elevation_deg)], flux_now, 0.0, True))
+    return jobs
+
+
 def illumination(
     z: np.ndarray,
     *,
@@ -121,18 +143,9 @@ def illumination(
     q_mean = np.zeros(shape, np.float32)
     q_now = np.zeros(shape, np.float32)
     lit_now = np.zeros(shape, np.float32)
-    absorb = 1.0 - cfg.bond_albedo
-    jobs = []  # (azimuth, elevations, flux, mean weight per level, epoch?)
-    for b in range(envelope.azimuth_deg.size):
-        az = float(envelope.azimuth_deg[b])
-        if envelope.weight[b] <= 0 or envelope.el_max_deg[b] + r <= _mask_deg(horizon_mask, az):
-            continue
-        levels = [float(e) for e in envelope.el_levels_deg[b]]
-        flux = absorb * cfg.solar_constant_w_m2 / float(envelope.distance_au[b]) ** 2
-        w = float(envelope.weight[b]) / len(levels)
-        jobs.append((az, [float(envelope.el_max_deg[b]), *levels], flux, w, False))
-    flux_now = absorb * cfg.solar_constant_w_m2 / float(sun_distance_au) ** 2
-    jobs.append((float(sun_azimuth_deg) % 360.0, [float(sun_elevation_deg)], flux_now, 0.0, True))
+    jobs = sweep_jobs(envelope, sun_azimuth_deg=sun_azimuth_deg,
+                      sun_elevation_deg=sun_elevation_deg, sun_distance_au=sun_distance_au,
+                      config=cfg, horizon_mask=horizon_mask)  # fmt: skip
     set_threads(workers)
     # Sweeps sharing a canonical frame share one canonical copy of the DEM.
     jobs.sort(key=lambda j: (sweep_orientation(j[0], shape).transpose,
@@ -229,12 +242,21 @@ def sky_horizons(
     clipped to ``[0, view_max_deg]``."""
     cfg = config or ThermalConfig()
     k = coarse_factor(resolution_m, cfg)
-    zc = block_mean(z, k)
+    return sky_horizons_coarse(block_mean(z, k), resolution_m=resolution_m * k, config=cfg,
+                               workers=workers)  # fmt: skip
+
+
+def sky_horizons_coarse(zc: np.ndarray, *, resolution_m: float,
+                        config: ThermalConfig | None = None,
+                        workers: int = 2) -> np.ndarray:  # fmt: skip
+    """:func:`sky_horizons` of the DEM already block-averaged (``zc``, pixel
+    ``resolution_m``)."""
+    cfg = config or ThermalConfig()
     hi = math.radians(cfg.view_max_deg)
     out = np.empty((cfg.view_azimuths, *zc.shape))
     for j in range(cfg.view_azimuths):
         t = horizon_tangents(zc, azimuth_deg=360.0 * j / cfg.view_azimuths,
-                             resolution_m=resolution_m * k, workers=workers)  # fmt: skip
+                             resolution_m=resolution_m, workers=workers)  # fmt: skip
         out[j] = np.sin(np.clip(np.arctan(t), 0.0, hi)) ** 2
     return out
 
@@ -255,26 +277,28 @@ def _view_azimuths(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _view_at(z, sin2_h, sin_a, cos_a, res, k, r, c):  # pragma: no cover - numba
-    """View factor of pixel ``(r, c)``: the coarse horizons above its tangent plane."""
-    nr, nc = z.shape
+def _view_at(z, zr0, nr, sin2_h, sin_a, cos_a, res, k, r, c):  # pragma: no cover - numba
+    """View factor of pixel ``(r, c)`` of a grid of ``nr`` rows whose rows ``zr0..`` are
+    ``z`` (holding ``r``'s neighbours): the coarse horizons above its tangent plane."""
+    nc = z.shape[1]
+    i = r - zr0
     # dz/dx (east) and dz/dy (north) per metre, central (one-sided at the edges).
     if nc == 1:
         gx = 0.0
     elif c == 0:
-        gx = (z[r, 1] - z[r, 0]) / res
+        gx = (z[i, 1] - z[i, 0]) / res
     elif c == nc - 1:
-        gx = (z[r, c] - z[r, c - 1]) / res
+        gx = (z[i, c] - z[i, c - 1]) / res
     else:
-        gx = (z[r, c + 1] - z[r, c - 1]) / (2.0 * res)
+        gx = (z[i, c + 1] - z[i, c - 1]) / (2.0 * res)
     if nr == 1:
         gy = 0.0
     elif r == 0:
-        gy = -(z[1, c] - z[0, c]) / res
+        gy = -(z[i + 1, c] - z[i, c]) / res
     elif r == nr - 1:
-        gy = -(z[r, c] - z[r - 1, c]) / res
+        gy = -(z[i, c] - z[i - 1, c]) / res
     else:
-        gy = -(z[r + 1, c] - z[r - 1, c]) / (2.0 * res)
+        gy = -(z[i + 1, c] - z[i - 1, c]) / (2.0 * res)
     f = 0.0
     rc, cc = r // k, c // k
     for j in range(sin_a.size):
@@ -287,11 +311,12 @@ def _view_at(z, sin2_h, sin_a, cos_a, res, k, r, c):  # pragma: no cover - numba
 def _view_rows(z, sin2_h, sin_a, cos_a, res, k, r0, out):  # pragma: no cover - numba
     for i in numba.prange(out.shape[0]):
         for c in range(out.shape[1]):
-            out[i, c] = _view_at(z, sin2_h, sin_a, cos_a, res, k, r0 + i, c)
+            out[i, c] = _view_at(z, 0, z.shape[0], sin2_h, sin_a, cos_a, res, k, r0 + i, c)
 
 
 def temperature_rows(z: np.ndarray, q_w_m2: np.ndarray, sources: np.ndarray, sin2_h: np.ndarray,
-                     *, resolution_m: float, rows: range,
+                     *, resolution_m: float, rows: range, z_row0: int = 0,
+                     grid_rows: int | None = None,
                      config: ThermalConfig | None = None) -> np.ndarray:  # fmt: skip
     """Temperatures (K, float32 ``(n, len(rows), cols)``) of pixel ``rows`` of DEM ``z``
     for ``n`` absorbed direct fluxes ``q_w_m2`` (``(n, len(rows), cols)``), with their
@@ -302,25 +327,31 @@ def temperature_rows(z: np.ndarray, q_w_m2: np.ndarray, sources: np.ndarray, sin
     infrared and scattered sunlight ``Q_env = F (eps M_ir + (1 - A) M_vis)``: ``F`` the
     view factor (:func:`view_factor`), the terrain's emission at its direct-light
     equilibrium ``M_ir = S + q_geo`` and its scattered light ``M_vis = A S / (1 - A)``,
-    ``S`` the source upsampled bilinearly (see :class:`~.config.ThermalConfig`)."""
+    ``S`` the source upsampled bilinearly (see :class:`~.config.ThermalConfig`).
+
+    ``z`` may be a window of the DEM: its rows ``z_row0..`` of a grid of ``grid_rows``
+    (holding the row before and after ``rows`` where the grid has them)."""
     cfg = config or ThermalConfig()
     k = coarse_factor(resolution_m, cfg)
     sin_a, cos_a = _view_azimuths(sin2_h.shape[0])
     out = np.empty(np.shape(q_w_m2), np.float32)
     consts = np.array([cfg.emissivity, cfg.bond_albedo, cfg.geothermal_w_m2, SIGMA_SB])
-    _temperature_rows(np.asarray(z), np.asarray(q_w_m2), np.asarray(sources, np.float64),
+    z = np.asarray(z)
+    nr = z.shape[0] if grid_rows is None else int(grid_rows)
+    _temperature_rows(z, int(z_row0), nr, np.asarray(q_w_m2), np.asarray(sources, np.float64),
                       sin2_h, sin_a, cos_a, float(resolution_m), int(k), rows.start, consts,
                       out)  # fmt: skip
     return out
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _temperature_rows(z, q, src, sin2_h, sin_a, cos_a, res, k, r0, consts, out):  # pragma: no cover
+def _temperature_rows(z, zr0, nr, q, src, sin2_h, sin_a, cos_a, res, k, r0, consts,
+                      out):  # fmt: skip  # pragma: no cover
     eps, a, q_geo, sigma = consts[0], consts[1], consts[2], consts[3]
     for i in numba.prange(out.shape[1]):
         r = r0 + i
         for c in range(out.shape[2]):
-            view = _view_at(z, sin2_h, sin_a, cos_a, res, k, r, c)
+            view = _view_at(z, zr0, nr, sin2_h, sin_a, cos_a, res, k, r, c)
             for m in range(out.shape[0]):
                 s = _bilinear(src[m], k, r, c)
                 total = q[m, i, c] + view * ((eps + a) * s + eps * q_geo) + q_geo
@@ -353,8 +384,17 @@ def terrain_source(q_abs_w_m2: np.ndarray, *, resolution_m: float,
     env_radius_m`` (W/m^2), on the coarse cells of :func:`coarse_factor`."""
     cfg = config or ThermalConfig()
     k = coarse_factor(resolution_m, cfg)
+    return source_of_means(block_mean(q_abs_w_m2, k), resolution_m=resolution_m, config=cfg)
+
+
+def source_of_means(q_mean_k: np.ndarray, *, resolution_m: float,
+                    config: ThermalConfig | None = None) -> np.ndarray:  # fmt: skip
+    """:func:`terrain_source` from the flux's means over the coarse cells (``q_mean_k``;
+    ``resolution_m`` the DEM's pixel)."""
+    cfg = config or ThermalConfig()
+    k = coarse_factor(resolution_m, cfg)
     size = 2 * max(1, round(cfg.env_radius_m / (resolution_m * k))) + 1
-    return ndimage.uniform_filter(block_mean(q_abs_w_m2, k), size=size, mode="nearest")
+    return ndimage.uniform_filter(q_mean_k, size=size, mode="nearest")
 
 
 def equilibrium_temperature(q_w_m2, *, config: ThermalConfig | None = None) -> np.ndarray:

@@ -28,6 +28,71 @@ def label_patches(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return labels, areas
 
 
+class StripLabels:
+    """8-connected patches of a mask handed over a block of rows at a time, top down
+    (:meth:`add`): labels unique over the grid, patches that cross a seam joined by
+    union-find. :meth:`areas` gives each label its whole patch's area, so that
+    ``frost_of_areas(self.areas())[labels]`` equals :func:`frost_area_fraction`'s."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self._parent = [np.zeros(1, np.int64)]
+        self._areas = [np.zeros(1, np.int64)]
+        self._last = None  # the previous block's last row of labels
+        self._pairs = []
+
+    def add(self, mask: np.ndarray) -> np.ndarray:
+        """Labels (int64, 0 outside) of the next block of rows of the mask."""
+        lab, n = ndimage.label(np.asarray(mask, bool), structure=_EIGHT)
+        lab = lab.astype(np.int64)
+        areas = np.bincount(lab.ravel(), minlength=n + 1)[1:]
+        lab[lab > 0] += self.n
+        self._parent.append(np.arange(self.n + 1, self.n + n + 1, dtype=np.int64))
+        self._areas.append(areas.astype(np.int64))
+        if self._last is not None and lab.shape[0]:
+            first, cols = lab[0], lab.shape[1]
+            for d in (-1, 0, 1):  # the previous row's c joins this row's c + d
+                a = self._last[max(0, -d) : cols - max(0, d)]
+                b = first[max(0, d) : cols - max(0, -d)]
+                both = (a > 0) & (b > 0)
+                if both.any():
+                    self._pairs.append(np.unique(np.stack([a[both], b[both]], 1), axis=0))
+        if lab.shape[0]:
+            self._last = lab[-1].copy()
+        self.n += n
+        return lab
+
+    def roots(self) -> np.ndarray:
+        """The root label of every label (index 0: 0)."""
+        parent = np.concatenate(self._parent)
+        if self._pairs:
+            pairs = np.unique(np.concatenate(self._pairs), axis=0)
+
+            def find(i):
+                while parent[i] != i:
+                    parent[i] = parent[parent[i]]
+                    i = parent[i]
+                return i
+
+            for a, b in pairs.tolist():
+                ra, rb = find(a), find(b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+        while True:  # full path compression
+            nxt = parent[parent]
+            if np.array_equal(nxt, parent):
+                return parent
+            parent = nxt
+
+    def areas(self) -> np.ndarray:
+        """The area (cells) of each label's whole patch (index 0: 0)."""
+        roots = self.roots()
+        per_root = np.bincount(roots, weights=np.concatenate(self._areas), minlength=roots.size)
+        out = per_root[roots].astype(np.int64)
+        out[0] = 0
+        return out
+
+
 def frost_of_areas(areas_px: np.ndarray, *, resolution_m: float,
                    config: FrostConfig | None = None) -> np.ndarray:  # fmt: skip
     """Frost area fraction of each patch (-) from its area in cells (``areas_px[0]``: the

@@ -193,9 +193,11 @@ class FileSink:
     leaving, every write is finished; on an exception every unfinished file is discarded.
     """
 
-    def __init__(self, out_dir, *, shape, transform, crs, max_px: int = 640) -> None:
+    def __init__(self, out_dir, *, shape, transform, crs, max_px: int = 640,
+                 compress: str = "none") -> None:  # fmt: skip
         from concurrent.futures import ThreadPoolExecutor
 
+        self.compress = None if compress == "none" else compress
         self.out = Path(out_dir)
         self.shape = tuple(shape)
         self.transform, self.crs = transform, crs
@@ -219,7 +221,8 @@ class FileSink:
             w = GeoTiffWriter(self.out / f"{name}.tif", height=self.shape[0], width=self.shape[1],
                               count=bands, dtype=block.dtype, transform=self.transform,
                               crs=self.crs, descriptions=MINERALS if name == "minerals" else None,
-                              canonical=False, interleave="pixel")  # fmt: skip
+                              canonical=False, interleave="pixel",
+                              compress=self.compress)  # fmt: skip
             # Rows written in order to a pixel-interleaved file land in canonical block
             # order by themselves: the bytes do not depend on the block size.
             self.writers[name] = w.__enter__()
@@ -321,14 +324,19 @@ def stream_world(
         raise WorldModelError("the DEM has nodata cells; the world model needs a complete DEM")
     rows, cols = z.shape
     t = cfg.thermal
-    # Blocks of whole rows, at most tile_px of them and about 4 Mpx (their temporaries
-    # are float64 and several layers deep).
-    step = max(1, min(int(cfg.tile_px), _BLOCK_PX // cols))
-    blocks = [range(r0, min(rows, r0 + step)) for r0 in range(0, rows, step)]
+    blocks = _row_blocks(rows, cols, cfg.tile_px)
 
     def report(stage, frac):
         if progress is not None:
             progress(stage, frac)
+
+    if t.out_of_core(z.shape):
+        _stream_strips(lambda r0, r1: z[r0:r1], z.shape, sink=sink, resolution_m=resolution_m,
+                       craters=craters, seed=seed, envelope=envelope,
+                       sun_azimuth_deg=sun_azimuth_deg, sun_elevation_deg=sun_elevation_deg,
+                       sun_distance_au=sun_distance_au, config=cfg, horizon_mask=horizon_mask,
+                       report=report)  # fmt: skip
+        return
 
     illum = thermal.illumination(
         z,
@@ -390,14 +398,159 @@ def stream_world(
         sink.put("ice_wt_pct", b.start, ice.astype(np.float32))
         report("volatiles", 0.87 + 0.06 * b.stop / rows)
     del labels, t_max, t_mean
+    _stream_minerals(sink, seed=seed, blocks=blocks, cols=cols, resolution_m=resolution_m,
+                     config=cfg, report=report)  # fmt: skip
+    report("done", 1.0)
+
+
+def _row_blocks(rows: int, cols: int, tile_px: int) -> list[range]:
+    """Blocks of whole rows, at most ``tile_px`` of them and about 4 Mpx (their
+    temporaries are float64 and several layers deep)."""
+    step = max(1, min(int(tile_px), _BLOCK_PX // max(cols, 1)))
+    return [range(r0, min(rows, r0 + step)) for r0 in range(0, rows, step)]
+
+
+class _Scratch:
+    """Whole-grid float arrays kept on disk, read and written by rows (plain file reads
+    and writes, not a memory map: they never count as the process's memory)."""
+
+    def __init__(self, directory, cols: int) -> None:
+        self.dir = Path(directory)
+        self.cols = int(cols)
+        self.dtypes: dict = {}
+
+    def write(self, name: str, row0: int, block: np.ndarray) -> None:
+        block = np.ascontiguousarray(block)
+        self.dtypes.setdefault(name, block.dtype)
+        path = self.dir / f"{name}.raw"
+        with open(path, "r+b" if path.exists() else "w+b") as f:
+            f.seek(row0 * self.cols * block.dtype.itemsize)
+            f.write(block.tobytes())
+
+    def remove(self, name: str) -> None:
+        (self.dir / f"{name}.raw").unlink(missing_ok=True)
+
+    def read(self, name: str, r0: int, r1: int) -> np.ndarray:
+        dt = np.dtype(self.dtypes[name])
+        with open(self.dir / f"{name}.raw", "rb") as f:
+            f.seek(r0 * self.cols * dt.itemsize)
+            a = np.fromfile(f, dtype=dt, count=(r1 - r0) * self.cols)
+        return a.reshape(r1 - r0, self.cols)
+
+
+def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envelope,
+                   sun_azimuth_deg, sun_elevation_deg, sun_distance_au, config, horizon_mask,
+                   report, scratch_dir=None) -> None:  # fmt: skip
+    """:func:`stream_world` with the DEM read by ``read_rows(r0, r1)`` and nothing of the
+    grid's size held whole (``config.thermal.out_of_core``): the illumination strip by
+    strip (:mod:`.strips`), the fluxes, temperature extremes and shadow labels kept on
+    disk in ``scratch_dir`` (default the system's temporary directory) between passes,
+    the view factors and terrain sources on coarse cells, patches joined across blocks
+    (:class:`~.volatiles.StripLabels`)."""
+    import tempfile
+
+    from lunar_drake.science import strips
+
+    cfg = config
+    t = cfg.thermal
+    rows, cols = (int(v) for v in shape)
+    blocks = _row_blocks(rows, cols, cfg.tile_px)
+    k = thermal.coarse_factor(resolution_m, t)
+
+    def read(r0, r1):
+        zz = np.asarray(read_rows(r0, r1))
+        if not np.isfinite(zz).all():
+            raise WorldModelError(
+                "the DEM has nodata cells; the world model needs a complete DEM"
+            )
+        return zz
+
+    jobs = thermal.sweep_jobs(envelope, sun_azimuth_deg=sun_azimuth_deg,
+                              sun_elevation_deg=sun_elevation_deg,
+                              sun_distance_au=sun_distance_au, config=t,
+                              horizon_mask=horizon_mask)  # fmt: skip
+    q_names = ("q_max", "q_mean", "q_now")
+    with tempfile.TemporaryDirectory(prefix=".world-scratch-", dir=scratch_dir) as tmp:
+        scratch = _Scratch(tmp, cols)
+        for r0, il in strips.illumination_strips(
+            read, shape, resolution_m=resolution_m, jobs=jobs, config=t,
+            horizon_mask=horizon_mask, chunk=min(int(cfg.tile_px), 64), workers=cfg.workers,
+            progress=lambda i, n: report("sun over a year", 0.7 * i / n),
+        ):  # fmt: skip
+            n = il.ever_lit.shape[0]
+            for b in _row_blocks(n, cols, cfg.tile_px):
+                sl = slice(b.start, b.stop)
+                sink.put("psr", r0 + b.start, (il.ever_lit[sl] == 0).astype(np.uint8))
+                sink.put("lit_fraction", r0 + b.start, il.lit_now[sl])
+            scratch.write("ever_lit", r0, il.ever_lit)
+            q = (il.q_max_w_m2, il.q_mean_w_m2, il.q_now_w_m2)
+            for name, a in zip(q_names, q, strict=True):
+                scratch.write(name, r0, a)
+            del il
+        sin2_h = thermal.sky_horizons_coarse(
+            strips.coarse_dem(read, shape, k), resolution_m=resolution_m * k, config=t,
+            workers=cfg.workers)  # fmt: skip
+        sources = np.stack([
+            thermal.source_of_means(
+                strips.coarse_dem(lambda a, b, n=name: scratch.read(n, a, b), shape, k),
+                resolution_m=resolution_m, config=t)
+            for name in q_names
+        ])  # fmt: skip
+        report("view factors", 0.75)
+        patches = volatiles.StripLabels()
+        for b in blocks:
+            w0, w1 = max(0, b.start - 1), min(rows, b.stop + 1)
+            q = np.stack([scratch.read(name, b.start, b.stop) for name in q_names])
+            temps = thermal.temperature_rows(read(w0, w1), q, sources, sin2_h,
+                                             resolution_m=resolution_m, rows=b, z_row0=w0,
+                                             grid_rows=rows, config=t)  # fmt: skip
+            t_max, t_mean, t_now = temps[0], np.minimum(temps[1], temps[0]), temps[2]
+            sink.put("temperature_K", b.start, t_now)
+            sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh))
+            scratch.write("t_max", b.start, t_max)
+            scratch.write("t_mean", b.start, t_mean)
+            cold = (scratch.read("ever_lit", b.start, b.stop) == 0) & (t_max < cfg.ice.stable_K)
+            scratch.write("labels", b.start, patches.add(cold).astype(np.int32))
+        for name in (*q_names, "ever_lit"):  # done with: the disk space back at once
+            scratch.remove(name)
+        report("temperatures", 0.85)
+        per_label = volatiles.frost_of_areas(patches.areas(), resolution_m=resolution_m,
+                                             config=cfg.frost)  # fmt: skip
+        rim = volatiles.rim_factor(
+            (-(-rows // k), -(-cols // k)),
+            resolution_m=resolution_m * k,
+            x0_m=-0.5 * cols * resolution_m,
+            y1_m=0.5 * rows * resolution_m,
+            craters=craters,
+            config=cfg.ice,
+        )
+        report("shadow patches and gardening", 0.87)
+        for b in blocks:
+            t_max = scratch.read("t_max", b.start, b.stop)
+            t_mean = scratch.read("t_mean", b.start, b.stop)
+            sink.put("t_max_K", b.start, t_max)
+            sink.put("t_mean_K", b.start, t_mean)
+            labels = scratch.read("labels", b.start, b.stop)
+            sink.put("frost_area_frac", b.start, per_label[labels].astype(np.float32))
+            dry = volatiles.dry_layer_m(t_max, t_mean, config=cfg.ice)
+            sink.put("dry_layer_m", b.start, dry)
+            ice = volatiles.ice_wt_pct(dry, thermal.upsample(rim, k, b, cols), config=cfg.ice)
+            sink.put("ice_wt_pct", b.start, ice.astype(np.float32))
+            report("volatiles", 0.87 + 0.06 * b.stop / rows)
+    _stream_minerals(sink, seed=seed, blocks=blocks, cols=cols, resolution_m=resolution_m,
+                     config=cfg, report=report)  # fmt: skip
+    report("done", 1.0)
+
+
+def _stream_minerals(sink, *, seed, blocks, cols, resolution_m, config, report) -> None:
+    rows = blocks[-1].stop
     for b in blocks:
         h, minerals = mineral_layers.mineral_fields(
             seed, window=(b.start, 0, len(b), cols), resolution_m=resolution_m,
-            config=cfg.minerals)  # fmt: skip
+            config=config.minerals)  # fmt: skip
         sink.put("h_minerals_ppm", b.start, h)
         sink.put("minerals", b.start, minerals)
         report("minerals", 0.93 + 0.07 * b.stop / rows)
-    report("done", 1.0)
 
 
 def compute_world(z: np.ndarray, **kwargs) -> dict:
@@ -458,45 +611,51 @@ def build_world(
     t0 = time.perf_counter()
     hf = Heightfield.open(dem)
     try:
-        z = np.asarray(hf.read_window(0, 0, *hf.shape), np.float32)
-        holes = int(np.count_nonzero(~np.isfinite(z)))
-        if holes:
-            raise WorldModelError(
-                f"{str(dem)!r} has {holes} nodata cells; the world model needs a complete DEM"
-            )
+        shape = tuple(int(v) for v in hf.shape)
+        strips = cfg.thermal.out_of_core(shape)
+        z = None
+        if not strips:
+            z = np.asarray(hf.read_window(0, 0, *shape), np.float32)
+            holes = int(np.count_nonzero(~np.isfinite(z)))
+            if holes:
+                raise WorldModelError(
+                    f"{str(dem)!r} has {holes} nodata cells; the world model needs a complete DEM"
+                )
         env = sun_envelope(hf, utc=utc, config=cfg.sun)
         site, beta = site_and_grid_north(hf, enu_basis=enu_basis, SiteLocation=SiteLocation)
         se = sun_earth_enu(utc=utc, site=site)
         az = (float(se.sun_azimuth_deg) + beta) % 360.0
         el = float(se.sun_elevation_deg)
         transform, crs, res = hf.transform, hf.crs, hf.resolution_m
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        clock = _StageClock(t0, _progress_bar(progress))
+        clock("read the DEM and the Sun's envelope", 0.0)
+        sun = dict(envelope=env, sun_azimuth_deg=az, sun_elevation_deg=el,
+                   sun_distance_au=float(se.sun_distance_km) / AU_KM)  # fmt: skip
+        try:
+            with FileSink(out, shape=shape, transform=transform, crs=crs,
+                          compress=cfg.compress) as sink:  # fmt: skip
+                if strips:
+                    def read_rows(r0, r1):
+                        return hf.read_window(r0, 0, r1 - r0, shape[1])
+
+                    _stream_strips(read_rows, shape, sink=sink, resolution_m=res,
+                                   craters=craters, seed=seed, config=cfg, horizon_mask=None,
+                                   report=clock, scratch_dir=out, **sun)  # fmt: skip
+                    z = _decimated(read_rows, shape, sink.step)
+                else:
+                    stream_world(z, sink=sink, resolution_m=res, craters=craters, seed=seed,
+                                 config=cfg, progress=clock, **sun)  # fmt: skip
+        finally:
+            clock(None, None)  # closes the bar; the clock goes on
     finally:
         hf.close()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    clock = _StageClock(t0, _progress_bar(progress))
-    clock("read the DEM and the Sun's envelope", 0.0)
-    try:
-        with FileSink(out, shape=z.shape, transform=transform, crs=crs) as sink:
-            stream_world(
-                z,
-                sink=sink,
-                resolution_m=res,
-                craters=craters,
-                seed=seed,
-                envelope=env,
-                sun_azimuth_deg=az,
-                sun_elevation_deg=el,
-                sun_distance_au=float(se.sun_distance_km) / AU_KM,
-                config=cfg,
-                progress=clock,
-            )
-    finally:
-        clock(None, None)  # closes the bar; the clock goes on
     return _finish_world(
         out,
         sink,
         z=z,
+        z_step=sink.step if strips else 1,
         resolution_m=res,
         utc=utc,
         envelope=env,
@@ -507,6 +666,16 @@ def build_world(
         extra={"site_dir": str(site_dir), "seed": seed},
         clock=clock,
     )
+
+
+def _decimated(read_rows, shape, step: int) -> np.ndarray:
+    """Every ``step``-th row and column of the DEM read by ``read_rows(r0, r1)``."""
+    rows, cols = shape
+    block = step * max(1, _BLOCK_PX // max(cols * step, 1))
+    return np.concatenate([
+        np.asarray(read_rows(r0, min(rows, r0 + block)))[::step, ::step]
+        for r0 in range(0, rows, block)
+    ])  # fmt: skip
 
 
 def write_world(
@@ -534,13 +703,14 @@ def write_world(
 
 def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
                   sun_azimuth_deg, sun_elevation_deg, config, png, extra,
-                  clock=None) -> dict:  # fmt: skip
+                  clock=None, z_step: int = 1) -> dict:  # fmt: skip
     """Heat maps from the sink's previews, then ``world.json`` (last; with the build's
-    ``seconds`` and ``stage_seconds`` when a :class:`_StageClock` is given)."""
+    ``seconds`` and ``stage_seconds`` when a :class:`_StageClock` is given). ``z``: the
+    DEM, or every ``z_step``-th row and column of it."""
     from lunar_drake.files import atomic_write_text
 
     step = sink.step
-    zp = None if z is None else np.asarray(z)[::step, ::step]
+    zp = None if z is None else np.asarray(z)[:: step // z_step, :: step // z_step]
     if png:
         previews = {n: sink.preview(n) for n in sink.writers}
         # The overview (the longest) first, so that it does not finish last alone.
