@@ -203,3 +203,32 @@ def test_only_big_dems_are_built_out_of_core():
     cfg = ThermalConfig()
     assert not cfg.out_of_core((8192, 8192)) and cfg.out_of_core((30720, 30720))
     assert ThermalConfig(whole_max_mpx=0).out_of_core((1, 1))
+
+
+def test_world_build_out_of_core_from_the_cli(small_site, tmp_path):
+    """``world build`` of a site forced out of core, compressed: every layer written,
+    close to the in-memory build of the same site; GDAL's cache limit restored."""
+    import rasterio
+    from rasterio.env import get_gdal_config
+
+    from lunar_drake.cli import main
+
+    site_dir = str(small_site[1].site.directory)
+    cfg = tmp_path / "strips.yaml"
+    cfg.write_text("thermal: {whole_max_mpx: 0, strip_px: 64}\ncompress: zstd\n")
+    cache = get_gdal_config("GDAL_CACHEMAX")
+    a, b = tmp_path / "whole", tmp_path / "strips"
+    assert main(["world", "build", site_dir, "--out", str(a), "--no-progress"]) == 0
+    assert main(["world", "build", site_dir, "--out", str(b), "--config", str(cfg),
+                 "--no-progress"]) == 0  # fmt: skip
+    assert get_gdal_config("GDAL_CACHEMAX") == cache
+    for name in ("psr", "t_max_K", "minerals", "ice_wt_pct"):
+        with rasterio.open(a / f"{name}.tif") as da, rasterio.open(b / f"{name}.tif") as db:
+            assert db.compression is not None and da.compression is None
+            va, vb = da.read(), db.read()
+        if name == "minerals":
+            assert np.array_equal(va, vb)
+        elif name == "psr":
+            assert np.mean(va != vb) < 0.01
+        else:
+            assert np.abs(va - vb).mean() < 0.01 * np.abs(va).mean() + 1e-6, name

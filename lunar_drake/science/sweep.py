@@ -319,11 +319,15 @@ def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode,
         k1 = min(k0 + chunk, k_max)
         hx, hz, zl = np.empty(nc), np.empty(nc), np.empty(nc)
         ax, az, bx, bz = np.empty(nc), np.empty(nc), np.empty(nc), np.empty(nc)
+        # A line runs from where it enters the grid (towards the Sun) to where it leaves
+        # the region's rows or columns on the far side.
         l0, l1 = _columns(s, k0 - nr, k0)
-        _line(zc, k0, s, w, x, inv_r, near, l0, min(l1, C1), hx, hz, zl, ax, az)
+        _, e1 = _columns(s, k0 - R1 - 1, k0 - R0 + 1)
+        _line(zc, k0, s, w, x, inv_r, near, l0, min(l1, e1, C1), hx, hz, zl, ax, az)
         for k in range(k0, k1):  # the pixels between lines k and k + 1
             l0, l1 = _columns(s, k + 1 - nr, k + 1)
-            _line(zc, k + 1, s, w, x, inv_r, near, l0, min(l1, C1), hx, hz, zl, bx, bz)
+            _, e1 = _columns(s, k - R1, k - R0 + 2)
+            _line(zc, k + 1, s, w, x, inv_r, near, l0, min(l1, e1, C1), hx, hz, zl, bx, bz)
             c_lo, c_hi = _columns(s, k - nr + 1, k)
             for c in range(max(c_lo, C0), min(c_hi, C1)):
                 r = k - s[c]

@@ -166,6 +166,11 @@ MODEL_VERSION = 2
 
 #: Pixels per block of :func:`stream_world`.
 _BLOCK_PX = 1 << 22
+#: Rows of the GeoTIFFs' tiles (:class:`~lunar_drake.terrain.geotiff.GeoTiffWriter`).
+_TIFF_TILE = 256
+#: GDAL's block cache (MB) while a world is built out of core: its default, 5 % of the
+#: machine's memory, would hold 1.2 GB of DEM and layer tiles here.
+_GDAL_CACHE_MB = 256
 
 
 class ArraySink:
@@ -403,10 +408,14 @@ def stream_world(
     report("done", 1.0)
 
 
-def _row_blocks(rows: int, cols: int, tile_px: int) -> list[range]:
+def _row_blocks(rows: int, cols: int, tile_px: int, *, align: int = 1) -> list[range]:
     """Blocks of whole rows, at most ``tile_px`` of them and about 4 Mpx (their
-    temporaries are float64 and several layers deep)."""
-    step = max(1, min(int(tile_px), _BLOCK_PX // max(cols, 1)))
+    temporaries are float64 and several layers deep). ``align``: blocks of at least
+    that many rows, when ``tile_px`` allows, rounded down to a multiple of it (so that
+    each block completes a row of GeoTIFF tiles)."""
+    step = max(1, min(int(tile_px), max(_BLOCK_PX // max(cols, 1), align)))
+    if step >= align:
+        step -= step % align
     return [range(r0, min(rows, r0 + step)) for r0 in range(0, rows, step)]
 
 
@@ -454,7 +463,9 @@ def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envel
     cfg = config
     t = cfg.thermal
     rows, cols = (int(v) for v in shape)
-    blocks = _row_blocks(rows, cols, cfg.tile_px)
+    # Whole rows of 256-px GeoTIFF tiles at a time: GDAL then never holds a part-written
+    # tile in its cache nor writes one twice (compressed).
+    blocks = _row_blocks(rows, cols, cfg.tile_px, align=_TIFF_TILE)
     k = thermal.coarse_factor(resolution_m, t)
 
     def read(r0, r1):
@@ -478,7 +489,7 @@ def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envel
             progress=lambda i, n: report("sun over a year", 0.7 * i / n),
         ):  # fmt: skip
             n = il.ever_lit.shape[0]
-            for b in _row_blocks(n, cols, cfg.tile_px):
+            for b in _row_blocks(n, cols, cfg.tile_px, align=_TIFF_TILE):
                 sl = slice(b.start, b.stop)
                 sink.put("psr", r0 + b.start, (il.ever_lit[sl] == 0).astype(np.uint8))
                 sink.put("lit_fraction", r0 + b.start, il.lit_now[sl])
@@ -609,10 +620,16 @@ def build_world(
     utc = utc or default_utc()
     seed = _site_seed(site_dir) if seed is None else int(seed)
     t0 = time.perf_counter()
+    from rasterio.env import get_gdal_config, set_gdal_config
+
     hf = Heightfield.open(dem)
+    cache = get_gdal_config("GDAL_CACHEMAX")  # an integer: bytes above 100000, else MB
+    strips = False
     try:
         shape = tuple(int(v) for v in hf.shape)
         strips = cfg.thermal.out_of_core(shape)
+        if strips:
+            set_gdal_config("GDAL_CACHEMAX", _GDAL_CACHE_MB)
         z = None
         if not strips:
             z = np.asarray(hf.read_window(0, 0, *shape), np.float32)
@@ -651,6 +668,8 @@ def build_world(
             clock(None, None)  # closes the bar; the clock goes on
     finally:
         hf.close()
+        if strips and isinstance(cache, int):
+            set_gdal_config("GDAL_CACHEMAX", cache)
     return _finish_world(
         out,
         sink,
@@ -673,8 +692,8 @@ def _decimated(read_rows, shape, step: int) -> np.ndarray:
     rows, cols = shape
     block = step * max(1, _BLOCK_PX // max(cols * step, 1))
     return np.concatenate([
-        np.asarray(read_rows(r0, min(rows, r0 + block)))[::step, ::step]
-        for r0 in range(0, rows, block)
+        np.asarray(read_rows(r0, min(rows, r0 + block)))[::step, ::step].copy()  # not a view
+        for r0 in range(0, rows, block)  # that would keep the whole block alive
     ])  # fmt: skip
 
 

@@ -175,7 +175,8 @@ def _creation_profile(
         profile["compress"] = str(compress).lower()
         if compress.lower() != "packbits":
             profile["predictor"] = 3 if dt.kind == "f" else 2
-        # The fastest levels: about 100 MB/s a core, within 1 % of the default's size.
+        # Tiles compressed by two threads (the same bytes as by one); the fastest levels.
+        profile["num_threads"] = "2"
         if compress.lower() == "zstd":
             profile["zstd_level"] = 1
         elif compress.lower() == "deflate":
