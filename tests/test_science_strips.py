@@ -192,11 +192,33 @@ def test_the_out_of_core_stack_is_the_whole_one_with_one_strip_and_tile_invarian
 
 @pytest.mark.parametrize(
     "field, value",
-    [("strip_px", 8), ("near_field_m", 0.0), ("far_cell_m", 500.0), ("whole_max_mpx", -1.0)],
+    [("strip_px", 8), ("near_field_m", 0.0), ("far_cell_m", 500.0), ("whole_max_mpx", -1.0),
+     ("near_field_m", 1.0)],  # less than twice the 0.64 m far cell: a gap between them
 )
 def test_bad_strip_settings_are_refused(field, value):
     with pytest.raises(ConfigError, match=field):
         ThermalConfig(**{field: value}).validate()
+
+
+def test_the_far_grid_is_bounded():
+    cfg = ThermalConfig()
+    assert strips.far_factor((30720, 30720), 0.04, cfg) == 16  # 0.64 m cells, 3.7 Mpx
+    assert strips.far_factor((2048, 2048), 0.04, cfg) == 16
+    k = strips.far_factor((20000, 20000), 1.0, cfg)  # 1 m pixels: not 1 px cells
+    assert k == 10 and (20000 / k) ** 2 <= strips.MAX_FAR_CELLS
+
+
+def test_the_height_datum_does_not_matter():
+    """Heights 3 km above the datum (a polar DEM's) give the same light: the far field
+    is stored relative to the mean height, so float32 loses nothing to the datum."""
+    z = _lunar(96, 80)
+    cfg = ThermalConfig(strip_px=32, near_field_m=2.0, far_cell_m=0.5)
+    env = _envelope()
+    lo = _strips(z, 0.1, env, cfg)
+    hi = _strips(z.astype(np.float64) + 3000.0, 0.1, env, cfg)
+    assert np.mean(lo["ever_lit"] != hi["ever_lit"]) < 1e-3
+    for name in ("q_max_w_m2", "q_mean_w_m2"):
+        assert np.abs(lo[name] - hi[name]).mean() < 1e-3 * lo[name].mean(), name
 
 
 def test_only_big_dems_are_built_out_of_core():

@@ -77,8 +77,9 @@ class ThermalConfig:
             beyond ``near_field_m`` from a decimated copy (:mod:`.strips`).
         strip_px: rows of each illumination strip out of core (px), [16, 2^20].
         near_field_m: with strips, terrain at least this far around a strip is swept at
-            full resolution (m), (0, 1e4].
-        far_cell_m: with strips, the pixel of the decimated DEM beyond (m), (0, 100].
+            full resolution (m), (0, 1e4], at least twice ``far_cell_m``.
+        far_cell_m: with strips, the pixel of the decimated DEM beyond (m), (0, 100]
+            (coarser where its grid would exceed 4 Mpx).
     """
 
     bond_albedo: float = 0.12
@@ -109,6 +110,12 @@ class ThermalConfig:
         _int_range("strip_px", self.strip_px, 16, 1 << 20)
         check_range("near_field_m", self.near_field_m, 0.0, 1e4, lo_open=True, unit=" m")
         check_range("far_cell_m", self.far_cell_m, 0.0, 100.0, lo_open=True, unit=" m")
+        if self.near_field_m < 2.0 * self.far_cell_m:
+            raise ConfigError(
+                f"near_field_m = {self.near_field_m!r} must be at least twice far_cell_m = "
+                f"{self.far_cell_m!r}: the far field starts a far cell short of the near "
+                "field's edge"
+            )
 
     def out_of_core(self, shape) -> bool:
         """Whether a DEM of ``shape`` is built strip by strip (``whole_max_mpx``)."""

@@ -22,7 +22,8 @@
 Memory: the window's DEM (float32 read, float64 canonical copy: 12 bytes a window
 pixel), the strip's far tangents and accumulators (21 bytes a strip pixel; the window's
 arrays are allocated whole but their halo rows are never touched), plus the far fields
-(8 bytes a coarse cell a sweep). With one strip that covers the grid the result equals
+(8 bytes a coarse cell a sweep; :func:`far_factor` keeps that under 32 MB a sweep).
+With one strip that covers the grid the result equals
 :func:`~lunar_drake.science.thermal.illumination` byte for byte.
 """
 
@@ -63,12 +64,14 @@ def coarse_dem(read_rows, shape, k: int) -> np.ndarray:
 
 
 def far_fields(zk: np.ndarray, jobs, *, resolution_m: float, near_field_m: float,
+               z_ref: float = 0.0,
                workers: int = 2) -> list[tuple[np.ndarray, np.ndarray]]:  # fmt: skip
     """Per sweep of ``jobs`` (:func:`~lunar_drake.science.thermal.sweep_jobs`), the far
     field of coarse DEM ``zk`` (pixel ``resolution_m``): ``(a, b)`` float32 with the
-    steepest caster at least ``near_field_m`` away seen from height ``z`` at tangent
-    ``a - z b`` (``b`` = 1 / its distance, 1/m; ``a`` = NO_CASTER, ``b`` = 0 where there
-    is none)."""
+    steepest caster from a coarse step short of ``near_field_m`` on, seen from height
+    ``z`` at tangent ``a - (z - z_ref) b`` (``b`` = 1 / its distance, 1/m; ``a`` =
+    NO_CASTER, ``b`` = 0 where there is none; ``z_ref`` keeps float32 exact whatever the
+    height datum)."""
     set_threads(workers)
     out = []
     for az, *_ in jobs:
@@ -82,7 +85,7 @@ def far_fields(zk: np.ndarray, jobs, *, resolution_m: float, near_field_m: float
         inv_d = np.zeros(zk.shape, np.float64)
         sw.run(FAR, np.zeros(11), [0.0], o.canon(t), o.canon(inv_d), np.zeros((1, 1), np.uint8))
         none = t <= 0.5 * NO_CASTER
-        a = np.where(none, NO_CASTER, t + zk * inv_d).astype(np.float32)
+        a = np.where(none, NO_CASTER, t + (zk - z_ref) * inv_d).astype(np.float32)
         out.append((a, np.where(none, 0.0, inv_d).astype(np.float32)))
     return out
 
@@ -96,10 +99,11 @@ def _axis(i, k, n):  # pragma: no cover - numba
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _far_pixels(a, b, k, zc, transpose, flip, row0, region, out):  # pragma: no cover
+def _far_pixels(a, b, k, z_ref, zc, transpose, flip, row0, region, out):  # pragma: no cover
     """``out[R, C]``: the far tangent of canonical pixel ``(R, C)`` of ``region`` (``R0,
     R1, C0, C1``) of a window whose grid row 0 is the DEM's ``row0`` (``zc`` its
-    canonical heights); ``out`` is left untouched elsewhere."""
+    canonical heights; ``a, b, z_ref`` of :func:`far_fields`); ``out`` is left untouched
+    elsewhere."""
     nc = zc.shape[1]
     na, ma = a.shape
     for R in numba.prange(region[0], region[1]):
@@ -112,7 +116,18 @@ def _far_pixels(a, b, k, zc, transpose, flip, row0, region, out):  # pragma: no 
                 a[r1, c0] * (1.0 - fc) + a[r1, c1] * fc) * fr  # fmt: skip
             bv = (b[r0, c0] * (1.0 - fc) + b[r0, c1] * fc) * (1.0 - fr) + (
                 b[r1, c0] * (1.0 - fc) + b[r1, c1] * fc) * fr  # fmt: skip
-            out[R, C] = av - zc[R, C] * bv
+            out[R, C] = av - (zc[R, C] - z_ref) * bv
+
+
+#: The far field's coarse grid holds at most this many cells (8 bytes each a sweep).
+MAX_FAR_CELLS = 4_000_000
+
+
+def far_factor(shape, resolution_m: float, config: ThermalConfig) -> int:
+    """Pixels per side of the far field's cells: about ``config.far_cell_m``, coarser
+    where the grid would have more than :data:`MAX_FAR_CELLS` of them."""
+    k = max(1, round(config.far_cell_m / resolution_m))
+    return max(k, math.ceil(math.sqrt(int(shape[0]) * int(shape[1]) / MAX_FAR_CELLS)))
 
 
 def _canonical(o, gr: float, gc: float, window_shape) -> tuple[float, float]:
@@ -138,10 +153,12 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
     halo = math.ceil(config.near_field_m / resolution_m)
     whole = strip >= rows
     far = []
-    k = max(1, round(config.far_cell_m / resolution_m))
+    k = far_factor(shape, resolution_m, config)
+    z_ref = 0.0
     if not whole:
         zk = coarse_dem(read_rows, (rows, cols), k)
-        far = far_fields(zk, jobs, resolution_m=resolution_m * k,
+        z_ref = float(np.mean(zk))
+        far = far_fields(zk, jobs, resolution_m=resolution_m * k, z_ref=z_ref,
                          near_field_m=config.near_field_m, workers=workers)  # fmt: skip
         del zk
     set_threads(workers)
@@ -164,7 +181,7 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
             az, els, flux, w, epoch = jobs[j]
             o = sweep_orientation(az, wshape)
             if (o.transpose, o.flip) != key:
-                key, zc = (o.transpose, o.flip), None
+                key, zc, sw = (o.transpose, o.flip), None, None  # one canonical copy at once
                 zc = canonical_dem(zw, o)
             sw = Sweep(zw, azimuth_deg=az, resolution_m=resolution_m, chunk=chunk, near=near,
                        canonical=zc)  # fmt: skip
@@ -182,8 +199,8 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
                     region = (lo, hi, 0, o.shape[1])
                 # Only the strip's pixels are written: the halo's pages are never touched.
                 tfar = np.empty(o.shape, np.float32)
-                _far_pixels(far[j][0], far[j][1], k, zc, bool(o.transpose), bool(o.flip), w0,
-                            np.array(region, np.int64), tfar)  # fmt: skip
+                _far_pixels(far[j][0], far[j][1], k, z_ref, zc, bool(o.transpose), bool(o.flip),
+                            w0, np.array(region, np.int64), tfar)  # fmt: skip
             a, b = ((acc.lit_now, acc.q_now_w_m2) if epoch
                     else (acc.q_max_w_m2, acc.q_mean_w_m2))  # fmt: skip
             sw.run(EPOCH if epoch else SECTOR, par, els, o.canon(a), o.canon(b),
@@ -192,9 +209,9 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
         sl = slice(r0 - w0, r1 - w0)
         parts = (acc.ever_lit, acc.q_max_w_m2, acc.q_mean_w_m2, acc.q_now_w_m2, acc.lit_now)
         yield r0, Illumination(*(np.ascontiguousarray(a[sl]) for a in parts))
-        del zw, zc, acc
+        del zw, zc, acc, sw
         if progress is not None:
             progress(si + 1, len(starts))
 
 
-__all__ = ["coarse_dem", "far_fields", "illumination_strips"]
+__all__ = ["MAX_FAR_CELLS", "coarse_dem", "far_factor", "far_fields", "illumination_strips"]

@@ -27,9 +27,11 @@ with ``world.json`` is complete. Every layer is range-checked before it is writt
 (:func:`check_layer`); each file is written under a temporary name and renamed.
 
 Layers are computed in blocks of ``tile_px`` rows and written window by window
-(:func:`stream_world`); the DEM, the sunlight accumulators and the temperature extremes
-are held whole (about 45 bytes per pixel). Every value is bit-identical for any
-``tile_px``. Out-of-core building of the paper's 30720^2 stack is not done yet.
+(:func:`stream_world`). Up to ``thermal.whole_max_mpx`` the DEM, the sunlight
+accumulators and the temperature extremes are held whole (about 45 bytes per pixel);
+larger DEMs, such as the paper's 30720^2, are built out of core (:func:`_stream_strips`,
+:mod:`.strips`: the DEM read a strip at a time, a decimated far field, the passes'
+arrays on disk). Every value is bit-identical for any ``tile_px``.
 """
 
 from __future__ import annotations
@@ -492,7 +494,8 @@ def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envel
             for b in _row_blocks(n, cols, cfg.tile_px, align=_TIFF_TILE):
                 sl = slice(b.start, b.stop)
                 sink.put("psr", r0 + b.start, (il.ever_lit[sl] == 0).astype(np.uint8))
-                sink.put("lit_fraction", r0 + b.start, il.lit_now[sl])
+                # A copy: a view waiting to be written would keep the window alive.
+                sink.put("lit_fraction", r0 + b.start, il.lit_now[sl].copy())
             scratch.write("ever_lit", r0, il.ever_lit)
             q = (il.q_max_w_m2, il.q_mean_w_m2, il.q_now_w_m2)
             for name, a in zip(q_names, q, strict=True):
