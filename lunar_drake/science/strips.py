@@ -46,6 +46,7 @@ from lunar_drake.science.sweep import (
     canonical_dem,
     set_threads,
 )
+from lunar_drake.science.thermal import _axis  # coarse index and weight of a pixel
 
 
 def coarse_dem(read_rows, shape, k: int) -> np.ndarray:
@@ -88,14 +89,6 @@ def far_fields(zk: np.ndarray, jobs, *, resolution_m: float, near_field_m: float
         a = np.where(none, NO_CASTER, t + (zk - z_ref) * inv_d).astype(np.float32)
         out.append((a, np.where(none, 0.0, inv_d).astype(np.float32)))
     return out
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _axis(i, k, n):  # pragma: no cover - numba
-    """Lower and upper coarse index and weight of pixel index ``i`` (cells of ``k``)."""
-    u = min(max((i + 0.5) / k - 0.5, 0.0), n - 1.0)
-    i0 = min(math.floor(u), max(n - 2, 0))
-    return i0, min(i0 + 1, n - 1), u - i0
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")

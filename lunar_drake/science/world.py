@@ -385,14 +385,7 @@ def stream_world(
     labels, areas = volatiles.label_patches(cold)
     del cold
     per_patch = volatiles.frost_of_areas(areas, resolution_m=resolution_m, config=cfg.frost)
-    rim = volatiles.rim_factor(
-        (-(-rows // k), -(-cols // k)),
-        resolution_m=resolution_m * k,
-        x0_m=-0.5 * cols * resolution_m,
-        y1_m=0.5 * rows * resolution_m,
-        craters=craters,
-        config=cfg.ice,
-    )
+    rim = _rim((rows, cols), k=k, resolution_m=resolution_m, craters=craters, config=cfg)
     report("shadow patches and gardening", 0.87)
     for b in blocks:
         sl = slice(b.start, b.stop)
@@ -530,14 +523,7 @@ def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envel
         report("temperatures", 0.85)
         per_label = volatiles.frost_of_areas(patches.areas(), resolution_m=resolution_m,
                                              config=cfg.frost)  # fmt: skip
-        rim = volatiles.rim_factor(
-            (-(-rows // k), -(-cols // k)),
-            resolution_m=resolution_m * k,
-            x0_m=-0.5 * cols * resolution_m,
-            y1_m=0.5 * rows * resolution_m,
-            craters=craters,
-            config=cfg.ice,
-        )
+        rim = _rim((rows, cols), k=k, resolution_m=resolution_m, craters=craters, config=cfg)
         report("shadow patches and gardening", 0.87)
         for b in blocks:
             t_max = scratch.read("t_max", b.start, b.stop)
@@ -565,6 +551,20 @@ def _stream_minerals(sink, *, seed, blocks, cols, resolution_m, config, report) 
         sink.put("h_minerals_ppm", b.start, h)
         sink.put("minerals", b.start, minerals)
         report("minerals", 0.93 + 0.07 * b.stop / rows)
+
+
+def _rim(shape, *, k: int, resolution_m: float, craters, config) -> np.ndarray:
+    """The ice's rim factor on the coarse cells of ``k x k`` pixels of a grid of
+    ``shape`` (site origin at its centre)."""
+    rows, cols = shape
+    return volatiles.rim_factor(
+        (-(-rows // k), -(-cols // k)),
+        resolution_m=resolution_m * k,
+        x0_m=-0.5 * cols * resolution_m,
+        y1_m=0.5 * rows * resolution_m,
+        craters=craters,
+        config=config.ice,
+    )
 
 
 def compute_world(z: np.ndarray, **kwargs) -> dict:
