@@ -10,7 +10,7 @@ from lunar_drake.errors import ConfigError
 from lunar_drake.science import strips, thermal, volatiles
 from lunar_drake.science.config import ThermalConfig, WorldConfig
 from lunar_drake.science.sun_envelope import envelope_from_samples
-from lunar_drake.science.sweep import FAR, NO_CASTER, Sweep
+from lunar_drake.science.sweep import FAR, NO_CASTER, TANGENT, Sweep
 from lunar_drake.science.world import Craters, compute_world
 from lunar_drake.terrain.crs import MOON_RADIUS_M as R
 
@@ -90,6 +90,38 @@ def test_far_mode_is_the_steepest_caster_beyond_the_near_field(azimuth):
             assert b[r, c] == pytest.approx(1.0 / d[i], rel=1e-9)
             checked += 1
     assert checked > 500
+
+
+@pytest.mark.parametrize("azimuth", [10.0, 60.0, 100.0, 150.0, 190.0, 240.0, 280.0, 330.0])
+def test_the_far_field_reaches_each_pixel_at_its_grid_position(azimuth):
+    """On a plain (its own casters lie at about -1e-7) a sweep's tangent is its far
+    field's: ``a - (z - z_ref) b`` interpolated bilinearly at the pixel's place in the
+    whole grid (cell centres at ``(i + 0.5) k - 0.5`` px, edge cells held), for a window
+    that starts 10 rows down the grid, whatever the sweep's orientation. The reference
+    is numpy's ``interp`` along both axes."""
+    rng = np.random.default_rng(4)
+    k, grid_rows, row0, rows, cols = 4, 64, 10, 30, 44
+    na, ma = -(-grid_rows // k), -(-cols // k)
+    a = rng.uniform(0.05, 0.5, size=(na, ma)).astype(np.float32)
+    b = rng.uniform(0.0, 0.2, size=(na, ma)).astype(np.float32)
+    z = np.zeros((rows, cols))
+    z_ref = -0.3
+    sw = Sweep(z, azimuth_deg=azimuth, resolution_m=0.1)
+    o = sw.orient
+    t = np.full(z.shape, NO_CASTER, np.float32)
+    far = strips.far_field(a, b, k=k, z_ref=z_ref, row0=row0, shape=z.shape)
+    sw.run(TANGENT, np.zeros(11), [0.0], o.canon(t), o.canon(t), np.zeros((1, 1), np.uint8),
+           far=far)  # fmt: skip
+
+    def centre(i, n):  # pixel index -> coarse index, clamped to the cell centres
+        return np.clip((np.asarray(i, float) + 0.5) / k - 0.5, 0, n - 1)
+
+    ref_cells = a.astype(np.float64) - (0.0 - z_ref) * b.astype(np.float64)
+    u = centre(np.arange(cols), ma)
+    along = np.array([np.interp(u, np.arange(ma), row) for row in ref_cells])
+    v = centre(np.arange(row0, row0 + rows), na)
+    ref = np.array([np.interp(v, np.arange(na), along[:, c]) for c in range(cols)]).T
+    np.testing.assert_allclose(t, ref, rtol=0, atol=2e-6)
 
 
 def test_one_strip_over_the_grid_is_the_whole_grid_sweep_byte_for_byte():

@@ -63,6 +63,30 @@ def test_frost_only_inside_permanent_shadow(bowl_world):
     assert np.all(psr[frost > 0] == 1)
 
 
+def test_a_cell_lit_at_the_epoch_is_never_permanent_shadow():
+    """The year's sectors are swept at their centres (11.25 deg here) but the epoch at
+    the Sun's own azimuth (0 deg): a pillar's shadow falls on different cells in the
+    two. A cell lit at the epoch is lit once in the year, so it is no permanent shadow
+    and holds no frost, and its warmest moment is at least as warm as the epoch."""
+    z = np.zeros((64, 64))
+    z[2:5, 30:33] = 4.0  # a 4 m pillar near the north edge
+    k = np.arange(1461)
+    env = envelope_from_samples(np.full(k.size, 5.0), 5.0 + 0.2 * np.sin(2 * np.pi * k / 1461),
+                                np.full(k.size, 1.495978707e8), bins=16)  # fmt: skip
+    L = compute_world(z, resolution_m=RES, craters=Craters(*(np.zeros(0),) * 4), seed=1,
+                      envelope=env, sun_azimuth_deg=0.0, sun_elevation_deg=5.0,
+                      config=WorldConfig())  # fmt: skip
+    sector_shadow = L["psr"][30:60, 20:30] == 1
+    lit_now = L["lit_fraction"][30:60, 20:30] > 0.5
+    assert lit_now.all()  # west of the epoch's shadow
+    assert not sector_shadow.any()
+    assert not (L["psr"] == 1)[L["lit_fraction"] > 0].any()
+    assert (L["t_max_K"] >= L["temperature_K"]).all()
+    assert (L["frost_area_frac"][L["temperature_K"] > 110.0] == 0).all()
+    # Where the epoch's shadow lies, the sector's Sun still shines.
+    assert (L["psr"][30:60, 30:33] == 0).all()
+
+
 def test_frost_grows_with_patch_area():
     psr = np.zeros((20, 20), np.uint8)
     psr[1:3, 1:3] = 1  # 4 px = 4 m^2 at 1 m

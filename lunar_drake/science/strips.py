@@ -20,9 +20,11 @@
   rather than the pixel's.
 
 Memory: the window's DEM (float32 read, float64 canonical copy: 12 bytes a window
-pixel), the strip's far tangents and accumulators (21 bytes a strip pixel; the window's
-arrays are allocated whole but their halo rows are never touched), plus the far fields
-(8 bytes a coarse cell a sweep; :func:`far_factor` keeps that under 32 MB a sweep).
+pixel), the strip's accumulators (17 bytes a strip pixel; the window's arrays are
+allocated whole but their halo rows are never touched), plus the far fields (8 bytes a
+coarse cell a sweep; :func:`far_factor` keeps that under 32 MB a sweep). The sweep
+kernel interpolates a pixel's far tangent itself (:class:`~.sweep.FarField`), and only
+where its window's horizon leaves it lit at some level.
 With one strip that covers the grid the result equals
 :func:`~lunar_drake.science.thermal.illumination` byte for byte.
 """
@@ -42,6 +44,7 @@ from lunar_drake.science.sweep import (
     FAR,
     NO_CASTER,
     SECTOR,
+    FarField,
     Sweep,
     canonical_dem,
     set_threads,
@@ -91,25 +94,28 @@ def far_fields(zk: np.ndarray, jobs, *, resolution_m: float, near_field_m: float
     return out
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _far_pixels(a, b, k, z_ref, zc, transpose, flip, row0, region, out):  # pragma: no cover
-    """``out[R, C]``: the far tangent of canonical pixel ``(R, C)`` of ``region`` (``R0,
-    R1, C0, C1``) of a window whose grid row 0 is the DEM's ``row0`` (``zc`` its
-    canonical heights; ``a, b, z_ref`` of :func:`far_fields`); ``out`` is left untouched
-    elsewhere."""
-    nc = zc.shape[1]
-    na, ma = a.shape
-    for R in numba.prange(region[0], region[1]):
-        for C in range(region[2], region[3]):
-            cc = nc - 1 - C if flip else C
-            gr, gc = (cc, R) if transpose else (R, cc)
-            r0, r1, fr = _axis(row0 + gr, k, na)
-            c0, c1, fc = _axis(gc, k, ma)
-            av = (a[r0, c0] * (1.0 - fc) + a[r0, c1] * fc) * (1.0 - fr) + (
-                a[r1, c0] * (1.0 - fc) + a[r1, c1] * fc) * fr  # fmt: skip
-            bv = (b[r0, c0] * (1.0 - fc) + b[r0, c1] * fc) * (1.0 - fr) + (
-                b[r1, c0] * (1.0 - fc) + b[r1, c1] * fc) * fr  # fmt: skip
-            out[R, C] = av - (zc[R, C] - z_ref) * bv
+@numba.njit(cache=True, error_model="numpy")
+def _axes(i0, n_idx, k, n):  # pragma: no cover - numba
+    """:func:`~lunar_drake.science.thermal._axis` of pixel indices ``i0..i0+n_idx-1``:
+    lower and upper coarse indices and weights (the same values, computed once)."""
+    lo = np.empty(n_idx, np.int64)
+    hi = np.empty(n_idx, np.int64)
+    f = np.empty(n_idx)
+    for i in range(n_idx):
+        lo[i], hi[i], f[i] = _axis(i0 + i, k, n)
+    return lo, hi, f
+
+
+def far_field(a: np.ndarray, b: np.ndarray, *, k: int, z_ref: float, row0: int,
+              shape) -> FarField:  # fmt: skip
+    """The :class:`~lunar_drake.science.sweep.FarField` of one sweep's ``(a, b)``
+    (:func:`far_fields`, cells of ``k`` pixels) for a window of ``shape`` whose row 0
+    is the DEM's ``row0``."""
+    rows, cols = (int(v) for v in shape)
+    r_lo, r_hi, r_w = _axes(int(row0), rows, int(k), a.shape[0])
+    c_lo, c_hi, c_w = _axes(0, cols, int(k), a.shape[1])
+    index = np.stack([np.concatenate([r_lo, c_lo]), np.concatenate([r_hi, c_hi])])
+    return FarField(a, b, index, np.concatenate([r_w, c_w]), float(z_ref), rows)
 
 
 #: The far field's coarse grid holds at most this many cells (8 bytes each a sweep).
@@ -182,7 +188,7 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
             par = sw.sun_par(flux_w_m2=flux, mask_deg=_mask_deg(horizon_mask, az),
                              radius_deg=SUN_ANGULAR_RADIUS_DEG, w_mean=w,
                              centre=centre)  # fmt: skip
-            tfar, region = None, None
+            ff, region = None, None
             if not whole:
                 lo, hi = r0 - w0, r1 - w0
                 if o.transpose:
@@ -190,15 +196,11 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
                     region = (0, o.shape[0], *c)
                 else:
                     region = (lo, hi, 0, o.shape[1])
-                # Only the strip's pixels are written: the halo's pages are never touched.
-                tfar = np.empty(o.shape, np.float32)
-                _far_pixels(far[j][0], far[j][1], k, z_ref, zc, bool(o.transpose), bool(o.flip),
-                            w0, np.array(region, np.int64), tfar)  # fmt: skip
+                ff = far_field(*far[j], k=k, z_ref=z_ref, row0=w0, shape=wshape)
             a, b = ((acc.lit_now, acc.q_now_w_m2) if epoch
                     else (acc.q_max_w_m2, acc.q_mean_w_m2))  # fmt: skip
             sw.run(EPOCH if epoch else SECTOR, par, els, o.canon(a), o.canon(b),
-                   o.canon(acc.ever_lit), tfar=tfar, region=region, extent_px=(rows, cols))
-            del tfar
+                   o.canon(acc.ever_lit), far=ff, region=region, extent_px=(rows, cols))
         sl = slice(r0 - w0, r1 - w0)
         parts = (acc.ever_lit, acc.q_max_w_m2, acc.q_mean_w_m2, acc.q_now_w_m2, acc.lit_now)
         yield r0, Illumination(*(np.ascontiguousarray(a[sl]) for a in parts))
@@ -207,4 +209,11 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
             progress(si + 1, len(starts))
 
 
-__all__ = ["MAX_FAR_CELLS", "coarse_dem", "far_factor", "far_fields", "illumination_strips"]
+__all__ = [
+    "MAX_FAR_CELLS",
+    "coarse_dem",
+    "far_factor",
+    "far_field",
+    "far_fields",
+    "illumination_strips",
+]

@@ -40,6 +40,7 @@ arithmetic of its own column, so its value is bit-identical whatever the chunkin
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -52,7 +53,7 @@ NO_CASTER = -1.0e6
 _HALF_NO = 0.5 * NO_CASTER
 
 #: Pixel operations of :func:`_sweep`: the horizon tangent; a sector's sunlight
-#: (highest and mean flux, ever lit); the epoch's (lit fraction and flux); the far
+#: (highest and mean flux, ever lit); the epoch's (lit fraction and flux; ever lit); the far
 #: field alone (its tangent from the pixel's height and 1 / its distance, 1/m).
 TANGENT, SECTOR, EPOCH, FAR = 0, 1, 2, 3
 
@@ -240,6 +241,8 @@ def _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit):  # pragma: no co
         acc_a[r, c] = f
         q = 0.0
         if f > 0.0:
+            if acc_lit.shape == acc_a.shape:  # (else a placeholder: no flags kept)
+                acc_lit[r, c] = 1  # the epoch is a moment of the year: lit once
             g_r, g_c = _slope(zc, r, c, par[10])
             tilt_h = -(g_r * par[0] + g_c * par[1])
             cos_i = (lev[1, 0] + lev[2, 0] * tilt_h) / math.sqrt(1.0 + g_r * g_r + g_c * g_c)
@@ -301,18 +304,40 @@ def _columns(s, lo, hi):  # pragma: no cover - numba
     return c0, c1
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _far_at(fa, fb, f_i, f_w, z_ref, transpose, flip, n_rows, nc, r, c, z):  # pragma: no cover
+    """The far tangent (float32) of canonical pixel ``(r, c)`` (``nc`` canonical columns)
+    of height ``z``: ``fa - (z - z_ref) fb`` interpolated bilinearly at the pixel's grid
+    position (:class:`FarField`; its tables hold ``n_rows`` grid rows, then the
+    columns)."""
+    cc = nc - 1 - c if flip else c
+    gr, gc = (cc, r) if transpose else (r, cc)
+    gc += n_rows
+    r0, r1, fr = f_i[0, gr], f_i[1, gr], f_w[gr]
+    c0, c1, fc = f_i[0, gc], f_i[1, gc], f_w[gc]
+    av = (fa[r0, c0] * (1.0 - fc) + fa[r0, c1] * fc) * (1.0 - fr) + (
+        fa[r1, c0] * (1.0 - fc) + fa[r1, c1] * fc) * fr  # fmt: skip
+    bv = (fb[r0, c0] * (1.0 - fc) + fb[r0, c1] * fc) * (1.0 - fr) + (
+        fb[r1, c0] * (1.0 - fc) + fb[r1, c1] * fc) * fr  # fmt: skip
+    return np.float32(av - (z - z_ref) * bv)
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode, par, lev, acc_a,
-           acc_b, acc_lit, tfar, region):  # fmt: skip  # pragma: no cover - numba
+           acc_b, acc_lit, fa, fb, f_i, f_w, f_par, region):  # fmt: skip  # pragma: no cover
     """Runs the hull sweep over the pixels between lines ``k_min..k_max`` of canonical
     DEM ``zc`` and applies ``_pixel`` to each (see the module docstring) inside
-    ``region`` = ``(R0, R1, C0, C1)`` (canonical); ``tfar`` (canonical, or empty): a
-    further horizon tangent per pixel, from terrain the DEM does not hold."""
+    ``region`` = ``(R0, R1, C0, C1)`` (canonical); ``fa, fb, f_i, f_w``: the far field's
+    arrays (:class:`FarField`; ``fa`` empty: none), a further horizon tangent from
+    terrain the DEM does not hold; ``f_par``: its ``z_ref``, the orientation's
+    transpose and flip, and its grid rows. A pixel already dark at every level from its
+    lines skips the far and near fields (they only raise its horizon)."""
     nr, nc = zc.shape
     step_m = x[1] - x[0] if nc > 1 else 1.0
     reach = near + 2
     R0, R1, C0, C1 = region[0], region[1], region[2], region[3]
-    has_far = tfar.shape[0] > 0
+    has_far = fa.shape[0] > 0
+    z_ref, f_tr, f_fl, f_rows = f_par[0], f_par[1] != 0.0, f_par[2] != 0.0, int(f_par[3])
     n_chunks = (k_max - k_min + chunk - 1) // chunk
     for ci in numba.prange(n_chunks):
         k0 = k_min + ci * chunk
@@ -358,10 +383,14 @@ def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode,
                     acc_a[r, c] = t
                     acc_b[r, c] = 1.0 / d if t > _HALF_NO else 0.0
                     continue
-                if has_far and tfar[r, c] > t:
-                    t = tfar[r, c]
-                if mode == TANGENT or t < lev[4, 0]:  # else dark at every level already
-                    t = max(t, _near(zc, r, c, sigma, step_m, p_i, p_f, reach))
+                # Far and near casters only raise t: at or above lev[4, 0] the pixel is
+                # dark at every level already.
+                if mode == TANGENT or t < lev[4, 0]:
+                    if has_far:
+                        t = max(t, _far_at(fa, fb, f_i, f_w, z_ref, f_tr, f_fl, f_rows, nc, r, c,
+                                           zc[r, c]))  # fmt: skip
+                    if mode == TANGENT or t < lev[4, 0]:
+                        t = max(t, _near(zc, r, c, sigma, step_m, p_i, p_f, reach))
                 _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit)
             ax, bx = bx, ax
             az, bz = bz, az
@@ -388,6 +417,22 @@ def canonical_dem(z: np.ndarray, orient) -> np.ndarray:
     out = np.empty(orient.shape, np.float64)
     _turn(z, bool(orient.transpose), bool(orient.flip), out)
     return out
+
+
+class FarField(NamedTuple):
+    """A horizon tangent from terrain beyond a DEM, for :meth:`Sweep.run`: coarse cells
+    ``a, b`` (float32) give, at height ``z``, ``a - (z - z_ref) b``; a pixel takes that
+    interpolated bilinearly between the cells around it, from the tables ``index``
+    (``(2, rows + cols)`` int64: the lower and upper cell of each grid row of the DEM,
+    then of each column) and ``weight`` (the upper cell's weight), ``rows`` being the
+    DEM's grid rows (see :func:`~lunar_drake.science.strips.far_field`)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    index: np.ndarray
+    weight: np.ndarray
+    z_ref: float
+    rows: int
 
 
 class Sweep:
@@ -419,15 +464,16 @@ class Sweep:
         self.plan_i = np.ascontiguousarray(plan[:, :2].astype(np.int64))
         self.plan_f = np.ascontiguousarray(plan[:, 2:])
 
-    def run(self, mode, par, elevations_deg, acc_a, acc_b, acc_lit, *, tfar=None,
+    def run(self, mode, par, elevations_deg, acc_a, acc_b, acc_lit, *, far=None,
             region=None, extent_px=None) -> None:  # fmt: skip
         """Applies pixel operation ``mode`` with canonical accumulators, at the Sun
         ``elevations_deg`` (sector: its highest first, then its mean levels).
 
-        ``tfar``: a further horizon tangent per canonical pixel (terrain beyond this
-        DEM). ``region``: canonical ``(R0, R1, C0, C1)``, the only pixels computed
-        (default all). ``extent_px``: ``(rows, cols)`` of the whole grid when this DEM
-        is a window of it (bounds the Sun's tilt over it; default this DEM's).
+        ``far``: a :class:`FarField` of this DEM's grid, a further horizon tangent
+        per pixel (terrain beyond this DEM). ``region``: canonical ``(R0, R1, C0,
+        C1)``, the only pixels computed (default all). ``extent_px``: ``(rows, cols)``
+        of the whole grid when this DEM is a window of it (bounds the Sun's tilt over
+        it; default this DEM's).
         """
         e = np.radians(np.asarray(elevations_deg, np.float64).ravel())
         nr, nc = self.orient.shape
@@ -442,13 +488,18 @@ class Sweep:
         R0, R1, C0, C1 = (0, nr, 0, nc) if region is None else (int(v) for v in region)
         k_min = max(self.k_min, R0 + int(self.s[C0:C1].min()) if C1 > C0 else self.k_max)
         k_max = min(self.k_max, R1 + int(self.s[C0:C1].max()) if C1 > C0 else self.k_min)
-        far = np.zeros((0, 0), np.float32) if tfar is None else tfar
+        if far is None:
+            far = FarField(np.zeros((0, 0), np.float32), np.zeros((0, 0), np.float32),
+                           np.zeros((2, 0), np.int64), np.zeros(0), 0.0, 0)  # fmt: skip
+        o = self.orient
+        f_par = np.array([far.z_ref, float(o.transpose), float(o.flip), far.rows])
         # Chunks differ in work (lines near the corners are short): hand them out one
         # at a time.
         with numba.parallel_chunksize(1):
             _sweep(self.zc, self.s, self.w, self.x, self.inv_r, self.orient.sigma, self.near,
                    self.plan_i, self.plan_f, k_min, max(k_min, k_max), self.chunk, mode,
-                   np.asarray(par, np.float64), lev, acc_a, acc_b, acc_lit, far,
+                   np.asarray(par, np.float64), lev, acc_a, acc_b, acc_lit, far.a, far.b,
+                   far.index, far.weight, f_par,
                    np.array([R0, R1, C0, C1], np.int64))  # fmt: skip
 
     def sun_par(self, *, flux_w_m2: float, mask_deg: float, radius_deg: float,
@@ -494,6 +545,7 @@ __all__ = [
     "NO_CASTER",
     "SECTOR",
     "TANGENT",
+    "FarField",
     "Sweep",
     "canonical_dem",
     "horizon_tangents",

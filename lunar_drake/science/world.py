@@ -374,9 +374,10 @@ def stream_world(
         q = np.stack([illum.q_max_w_m2[sl], illum.q_mean_w_m2[sl], illum.q_now_w_m2[sl]])
         temps = thermal.temperature_rows(z, q, sources, sin2_h, resolution_m=resolution_m,
                                          rows=b, config=t)  # fmt: skip
-        t_max[sl] = temps[0]
-        t_mean[sl] = np.minimum(temps[1], temps[0])
         t_now = temps[2]
+        # The epoch is a moment of the year (its Sun at its own azimuth, not a sector's).
+        t_max[sl] = np.maximum(temps[0], t_now)
+        t_mean[sl] = np.minimum(temps[1], t_max[sl])
         sink.put("temperature_K", b.start, t_now)
         sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh))
     cold = (illum.ever_lit == 0) & (t_max < cfg.ice.stable_K)
@@ -511,7 +512,9 @@ def _stream_strips(read_rows, shape, *, sink, resolution_m, craters, seed, envel
             temps = thermal.temperature_rows(read(w0, w1), q, sources, sin2_h,
                                              resolution_m=resolution_m, rows=b, z_row0=w0,
                                              grid_rows=rows, config=t)  # fmt: skip
-            t_max, t_mean, t_now = temps[0], np.minimum(temps[1], temps[0]), temps[2]
+            t_now = temps[2]
+            t_max = np.maximum(temps[0], t_now)  # the epoch is a moment of the year
+            t_mean = np.minimum(temps[1], t_max)
             sink.put("temperature_K", b.start, t_now)
             sink.put("oh_ppm", b.start, volatiles.oh_ppm(t_now, config=cfg.oh))
             scratch.write("t_max", b.start, t_max)
