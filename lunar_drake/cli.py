@@ -91,6 +91,7 @@ def _plural(n: int, word: str) -> str:
 def _cmd_run(args) -> int:
     from lunar_drake import metrics, outputs
     from lunar_drake.files import check_replaceable, staged_directory
+    from lunar_drake.science.world import needs_world, run_world
     from lunar_drake.simulation import simulate
     from lunar_drake.site import load_site
 
@@ -111,6 +112,13 @@ def _cmd_run(args) -> int:
         t0 = time.perf_counter()
         site = load_site(scenario, progress=not args.no_progress)
         t_site = time.perf_counter() - t0
+        if needs_world(scenario):
+            print("Building the world model (science sensors)...", flush=True)
+            t0 = time.perf_counter()
+            world_dir, cached = run_world(scenario=scenario, site=site,
+                                          progress=not args.no_progress)  # fmt: skip
+            print(f"World model: {'cached' if cached else 'built'} in "
+                  f"{time.perf_counter() - t0:.1f} s ({world_dir})", flush=True)  # fmt: skip
         logs = simulate(
             scenario=scenario,
             site=site,
@@ -341,9 +349,12 @@ def _cmd_world_build(args) -> int:
                 "(the shape of world.json's 'config')"
             )
         if raw:  # an empty file: the defaults
+            from lunar_drake.scenario_files import check_yaml_schema
+
+            check_yaml_schema(Path(args.config).read_text(), WorldConfig, source=where)
             try:
                 config = yaml_load_typed(schema=WorldConfig, filename=args.config)
-            except RuntimeError as exc:
+            except Exception as exc:  # Drake raises RuntimeError/TypeError on a bad value
                 raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
         try:
             config.validate()
@@ -714,40 +725,45 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Runs one command; returns the exit status (0, 2 for bad input, 130 interrupted)."""
+    """Runs one command; returns the exit status (0, 2 for bad input, 130 interrupted,
+    143 terminated: SIGTERM is taken as Ctrl-C is, partial outputs removed)."""
     from lunar_drake import interrupts
 
     parser = build_parser()
     args = parser.parse_args(argv)
     sigint = interrupts.LatchedSigint()
+    sigterm = interrupts.TermAsInterrupt()
     try:
         return args.func(args)
     except LunarDrakeError as exc:
         if interrupts.requested():  # Ctrl-C that a library turned into another error
-            return _interrupted()
+            return _interrupted(sigterm.received)
         print(f"lunar-drake: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return _interrupted()
+        return _interrupted(sigterm.received)
     finally:
+        sigterm.restore()
         sigint.restore()
 
 
-def _interrupted() -> int:
-    print("lunar-drake: interrupted; partial outputs removed", file=sys.stderr)
-    return 130
+def _interrupted(terminated: bool = False) -> int:
+    """Reports an interrupt: 130 after Ctrl-C, 143 after SIGTERM (128 + the signal)."""
+    what = "terminated" if terminated else "interrupted"
+    print(f"lunar-drake: {what}; partial outputs removed", file=sys.stderr)
+    return 143 if terminated else 130
 
 
 def run() -> None:
     """The ``lunar-drake`` program: :func:`main`, then exit with its status. After Ctrl-C
-    it exits at once (streams flushed) instead of finalizing the interpreter: an
+    or SIGTERM it exits at once (streams flushed) instead of finalizing the interpreter: an
     extension interrupted mid-import (Open3D) can otherwise fail at exit and turn 130
     into 1, or re-raise the interrupt."""
     code = main()
-    if code == 130:
+    if code in (130, 143):
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(130)
+        os._exit(code)
     sys.exit(code)
 
 

@@ -13,6 +13,7 @@ path and the reason (one line, no traceback at the command line).
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import shutil
 import uuid
@@ -28,6 +29,7 @@ __all__ = [
     "check_output_file",
     "check_replaceable",
     "ensure_output_dir",
+    "remove_stale_siblings",
     "staged_directory",
     "temp_sibling",
 ]
@@ -41,6 +43,36 @@ def temp_sibling(path: str | os.PathLike, *, tag: str = "tmp") -> Path:
     """
     p = Path(path)
     return p.with_name(f".{p.stem}.{tag}-{os.getpid()}-{uuid.uuid4().hex[:8]}{p.suffix}")
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (on this machine)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # it exists but is not ours
+        return True
+    return True
+
+
+def remove_stale_siblings(path: str | os.PathLike) -> list[Path]:
+    """Removes the :func:`temp_sibling` directories of directory ``path`` left by
+    processes that no longer run (a build killed outright: SIGKILL, a power cut);
+    returns them. Only while ``path`` itself exists (else one of them may be the only
+    copy); those of a running process, this one's included, are left alone."""
+    p = Path(path)
+    removed = []
+    if not p.is_dir():
+        return removed
+    for tag in ("tmp", "old"):
+        pattern = f".{glob.escape(p.stem)}.{tag}-*-*{glob.escape(p.suffix)}"
+        for q in p.parent.glob(pattern):
+            pid = q.name[len(f".{p.stem}.{tag}-") :].split("-", 1)[0]
+            if pid.isdigit() and q.is_dir() and not q.is_symlink() and not _alive(int(pid)):
+                shutil.rmtree(q, ignore_errors=True)
+                removed.append(q)
+    return removed
 
 
 def _reason(exc: OSError) -> str:
@@ -210,7 +242,8 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
     aside, the new one renamed into place and the old one deleted. On an exception
     (``KeyboardInterrupt`` included) the temporary directory is removed, the previous
     ``path`` is untouched, and parent directories created for it are removed again if
-    they are still empty.
+    they are still empty. After a success, what killed processes left beside ``path``
+    goes (:func:`remove_stale_siblings`).
 
     Raises:
         OutputError: ``path`` is a file, or its parent cannot be created or written.
@@ -253,3 +286,4 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
             _unlink_quietly(old)
         else:
             shutil.rmtree(old, ignore_errors=True)
+    remove_stale_siblings(p)

@@ -10,6 +10,7 @@ the exception. Main thread only (Python delivers signals there).
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 
@@ -57,3 +58,31 @@ class LatchedSigint:
             self._installed = False
             if self._owner:
                 clear()
+
+
+class TermAsInterrupt:
+    """Takes SIGTERM as Ctrl-C (:func:`raise_and_latch`), so that staged outputs are
+    removed as after Ctrl-C; ``received`` tells which it was. Main thread of this
+    process only: a forked child (a drawing worker) gets the default handler back and
+    dies as it would have. ``restore()`` puts the previous handler back."""
+
+    def __init__(self) -> None:
+        self.received = False
+        self._pid = os.getpid()
+        self._installed = threading.current_thread() is threading.main_thread()
+        if self._installed:
+            self._previous = signal.signal(signal.SIGTERM, self._handle)
+
+    def _handle(self, signum, frame):
+        if os.getpid() != self._pid:  # a forked child: die as by default
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        self.received = True
+        raise_and_latch(signum, frame)
+
+    def restore(self) -> None:
+        if self._installed:
+            previous = self._previous
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+            self._installed = False

@@ -135,6 +135,17 @@ def _check_keys(node, schema, path: str, source: str) -> None:
         _check_keys(value, fields[key], full, source)
 
 
+def check_yaml_schema(text: str, schema, *, source: str) -> None:
+    """Raises ConfigError, naming the key and its line in ``source``, for a YAML tag,
+    a key ``schema`` (a dataclass) does not have, a section that is not a mapping or a
+    value that is not a number where one is wanted; before Drake's typed loading, whose
+    errors name neither."""
+    node = _compose(text, source)
+    if node is not None:
+        _check_tags(node, source)
+        _check_keys(node, schema, "", source)
+
+
 def _is_bare(node) -> bool:
     """A run's scenario.yaml: a mapping whose keys are Scenario fields."""
     names = {f.name for f in dc.fields(Scenario)}

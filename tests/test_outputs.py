@@ -429,3 +429,28 @@ def test_sigint_leaves_the_complete_site_or_nothing(tmp_path):
     else:
         assert proc.returncode != 0, err
     assert "Traceback" not in err, err  # cli.main reports Ctrl-C in one line
+
+
+def test_stale_staging_directories_go_after_the_next_success(tmp_path):
+    """A build killed outright (SIGKILL) leaves its staging directory; the next build
+    into the same place removes it once it has succeeded, but never one of a process
+    that still runs, nor anything while the destination is missing."""
+    from lunar_drake.files import remove_stale_siblings, staged_directory
+
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    dead = int(gone.stdout)
+    out = tmp_path / "world"
+    stale = [tmp_path / f".world.tmp-{dead}-deadbeef", tmp_path / f".world.old-{dead}-0badf00d"]
+    live = tmp_path / f".world.tmp-{os.getpid()}-c0ffee00"
+    other = tmp_path / f".worlds.tmp-{dead}-deadbeef"  # another destination's
+    for d in (*stale, live, other):
+        d.mkdir()
+        (d / "part.tif").write_bytes(b"x")
+    assert remove_stale_siblings(out) == []  # no destination yet: maybe the only copy
+    with staged_directory(out) as tmp:
+        (tmp / "a.txt").write_text("done")
+    assert (out / "a.txt").read_text() == "done"
+    assert not any(d.exists() for d in stale)
+    assert live.is_dir() and other.is_dir()
+

@@ -95,7 +95,11 @@ def test_a_failed_run_into_a_new_directory_leaves_nothing(cache, tmp_path, capsy
     capsys.readouterr()
 
 
-def test_an_interrupted_run_leaves_the_previous_run_untouched(cache, tmp_path):
+@pytest.mark.parametrize(("sig", "code", "word"), [(signal.SIGINT, 130, "interrupted"),
+                                                  (signal.SIGTERM, 143, "terminated")])  # fmt: skip
+def test_an_interrupted_run_leaves_the_previous_run_untouched(cache, tmp_path, sig, code, word):
+    """Ctrl-C, or SIGTERM (a job scheduler's stop, ``timeout``), mid-run: one line, no
+    traceback, the previous run untouched and no staging directory left."""
     out = tmp_path / "run"
     env = {**os.environ, "LUNAR_DRAKE_CACHE": str(cache)}
     exe = [sys.executable, "-m", "lunar_drake.cli", *RUN, "--scenario", "small"]
@@ -113,10 +117,10 @@ def test_an_interrupted_run_leaves_the_previous_run_untouched(cache, tmp_path):
     while time.time() < deadline and not any(".run.tmp-" in n for n in _siblings(out)):
         time.sleep(0.2)
     time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    assert "Traceback" not in err and "interrupted" in err
+    assert proc.returncode == code, err
+    assert "Traceback" not in err and word in err
     assert _tree(out) == before
     assert _siblings(out) == []
 

@@ -162,3 +162,20 @@ def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
     with open(tmp_path / "drill.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == outputs.DRILL_COLUMNS and [r["depth_m"] for r in rows][-1] == "0.5"
+
+
+def test_a_run_says_when_it_builds_its_world_model(tmp_path, monkeypatch, capsys):
+    """A run with a science sensor builds the site's world model before the diagram, with
+    a line saying so and where it is cached; the next run finds it cached."""
+    from lunar_drake.cli import main
+
+    monkeypatch.setenv("LUNAR_DRAKE_CACHE", str(tmp_path / "cache"))
+    args = ["run", "--scenario", "small", "--scenario-text", "{sensors: {nss: {enabled: true}}}",
+            "--duration", "0.5", "--no-meshcat", "--no-progress"]  # fmt: skip
+    lines = []
+    for i in range(2):
+        assert main([*args, "--out", str(tmp_path / f"r{i}")]) == 0
+        lines.append([s for s in capsys.readouterr().out.splitlines() if "World model:" in s])
+    assert len(lines[0]) == 1 and "World model: built in" in lines[0][0]
+    assert str(tmp_path / "cache" / "worlds") in lines[0][0]
+    assert len(lines[1]) == 1 and "World model: cached in" in lines[1][0]

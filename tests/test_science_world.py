@@ -359,13 +359,19 @@ def test_world_config_file_and_bad_layers_on_disk(small_site, tmp_path, capsys):
         == 2
     )
     assert "thermal.bond_albedo = 1.5" in capsys.readouterr().err
-    # Not YAML, a Python tag, not a mapping, OH limits crossed, an empty --utc, no site:
+    # Not YAML, a Python tag, not a mapping, OH limits crossed, a word or a fraction where
+    # a number is wanted, a section that is not a mapping, a misspelt key, an empty
+    # --utc, no site:
     # one line each, exit 2, naming what is wrong; nothing built.
     refusals = [
         ("oh: [1, 2\n", "is not valid YAML"),
         ("!!python/object/apply:os.system [echo]\n", "is not valid YAML"),
         ("- 1\n- 2\n", "holds a list"),
         ("oh: {min_ppm: 800}\n", "oh.min_ppm = 800.0 is above max_ppm = 750.0"),
+        ("thermal: {bond_albedo: high}\n", "line 1: thermal.bond_albedo = 'high' must be a number"),
+        ("thermal: 3\n", "thermal must be a mapping of keys"),
+        ("thermal: {bond_albdo: 0.1}\n", "unknown key 'thermal.bond_albdo'"),
+        ("compress: zstd\nthermal:\n  strip_px: 1.5\n", "line 3: thermal.strip_px = '1.5'"),
     ]
     for i, (text, msg) in enumerate(refusals):
         f = tmp_path / f"refused{i}.yaml"

@@ -78,6 +78,20 @@ def default_utc() -> str:
     return load_scenario(scenario_name="default").site.epoch_utc
 
 
+def _iso_utc(utc: str) -> str:
+    """``utc`` as given when it is ISO 8601, else as SPICE reads it (``JD 2461359.5``,
+    ``Nov 15 2027``), in ISO 8601 to the millisecond: ``world.json`` always holds ISO."""
+    import datetime
+
+    from lunar_drake.ephemeris.sun_earth import tdb_s_to_utc, utc_to_tdb_s
+
+    try:
+        datetime.datetime.fromisoformat(str(utc))
+        return str(utc)
+    except ValueError:
+        return tdb_s_to_utc(utc_to_tdb_s(utc))
+
+
 def check_layer(name: str, values: np.ndarray) -> tuple[float, float]:
     """``(min, max)`` of ``values``; raises :class:`WorldModelError` naming the layer, its
     range and the allowed one when ``values`` has NaN or leaves the layer's physical
@@ -164,7 +178,8 @@ class World:
 
 #: Version of the layers' computation: part of the cache key (:func:`world_key`), so a
 #: cached world built by older code is rebuilt. 2: hull-sweep horizons (:mod:`.sweep`).
-MODEL_VERSION = 2
+#: 3: a cell lit at the epoch is not permanent shadow; ``t_max`` >= the epoch's.
+MODEL_VERSION = 3
 
 #: Pixels per block of :func:`stream_world`.
 _BLOCK_PX = 1 << 22
@@ -623,7 +638,7 @@ def build_world(
             "terrain synth' is needed"
         )
     craters = read_craters(site_dir / "craters.csv")
-    utc = utc or default_utc()
+    utc = _iso_utc(utc or default_utc())
     seed = _site_seed(site_dir) if seed is None else int(seed)
     t0 = time.perf_counter()
     from rasterio.env import get_gdal_config, set_gdal_config
@@ -688,7 +703,7 @@ def build_world(
         sun_elevation_deg=el,
         config=cfg,
         png=png,
-        extra={"site_dir": str(site_dir), "seed": seed},
+        extra={"site_dir": str(site_dir.resolve()), "seed": seed},
         clock=clock,
     )
 
@@ -758,6 +773,7 @@ def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
             "samples": envelope.samples,
             "azimuth_bins": int(envelope.azimuth_deg.size),
             "max_elevation_deg": envelope.max_elevation_deg,
+            "azimuth_deg": [round(float(v), 4) for v in envelope.azimuth_deg],  # centres
             "el_max_deg": [round(float(v), 4) for v in envelope.el_max_deg],
         },
         "psr_fraction": stats["psr"]["mean"],
@@ -870,38 +886,69 @@ def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
     return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
 
-def cached_world(
-    site_dir, *, utc: str, config: WorldConfig | None = None, names=None, progress: bool = False
-) -> dict:
-    """The layers ``names`` (default all) of a site's world model at ``utc``, built on
-    first use into ``<cache>/worlds/<key>`` (see :func:`world_key`; ``cache`` as for
-    sites, $LUNAR_DRAKE_CACHE) and read from there afterwards (range-checked)."""
+def cached_world_dir(site_dir, *, utc: str, config: WorldConfig | None = None,
+                     progress: bool = False) -> tuple[Path, bool]:  # fmt: skip
+    """``(directory, was_cached)``: a site's world model at ``utc``, built on first use
+    into ``<cache>/worlds/<key>`` (see :func:`world_key`; ``cache`` as for sites,
+    $LUNAR_DRAKE_CACHE)."""
     from lunar_drake.files import staged_directory
     from lunar_drake.site import cache_root
 
     cfg = config or WorldConfig()
     d = cache_root() / "worlds" / world_key(site_dir, utc=utc, config=cfg)
-    if not (d / "world.json").is_file():
-        d.parent.mkdir(parents=True, exist_ok=True)
-        with staged_directory(d) as tmp:
-            build_world(
-                site_dir=site_dir, out_dir=tmp, utc=utc, config=cfg, png=False, progress=progress
-            )
+    if (d / "world.json").is_file():
+        return d, True
+    d.parent.mkdir(parents=True, exist_ok=True)
+    with staged_directory(d) as tmp:
+        build_world(
+            site_dir=site_dir, out_dir=tmp, utc=utc, config=cfg, png=False, progress=progress
+        )
+    return d, False
+
+
+def cached_world(
+    site_dir, *, utc: str, config: WorldConfig | None = None, names=None, progress: bool = False
+) -> dict:
+    """The layers ``names`` (default all) of a site's world model at ``utc``
+    (:func:`cached_world_dir`: built on first use, read from the cache afterwards;
+    range-checked)."""
+    d, _ = cached_world_dir(site_dir, utc=utc, config=config, progress=progress)
     return {n: read_world_layer(d, n) for n in (names or LAYERS)}
 
 
-def site_layers(*, scenario, site, names, who: str, progress: bool = False) -> dict:
-    """Layers ``names`` of a run's site at its epoch (the world model, built on first
-    use and cached: :func:`cached_world`); ``who`` names the instrument in the error a
-    site without a crater catalog raises."""
+def needs_world(scenario) -> bool:
+    """Whether a run of ``scenario`` reads the site's world model (a science sensor)."""
+    s = scenario.sensors
+    return bool(s.nss.enabled or s.nirvss.enabled or s.drill.enabled)
+
+
+def _world_site_dir(site, who: str) -> Path:
     directory = site.site.directory
     if directory is None or not (Path(directory) / "craters.csv").is_file():
         raise WorldModelError(
             f"{who} needs a synthesized site with a crater catalog; the site "
             f"{str(site.site.dem)!r} has none (set terrain to synthesize one)"
         )
-    return cached_world(directory, utc=scenario.site.epoch_utc, config=scenario.science,
-                        names=names, progress=progress)  # fmt: skip
+    return Path(directory)
+
+
+def run_world(*, scenario, site, progress: bool = False) -> tuple[Path, bool]:
+    """``(directory, was_cached)`` of a run's world model (:func:`cached_world_dir`),
+    built now if a science sensor will read it: before the diagram, so a progress bar
+    can show it."""
+    who = next(n for n in ("nss", "nirvss", "drill")
+               if getattr(scenario.sensors, n).enabled)  # fmt: skip
+    return cached_world_dir(_world_site_dir(site, f"sensors.{who}"),
+                            utc=scenario.site.epoch_utc, config=scenario.science,
+                            progress=progress)  # fmt: skip
+
+
+def site_layers(*, scenario, site, names, who: str, progress: bool = False) -> dict:
+    """Layers ``names`` of a run's site at its epoch (the world model, built on first
+    use and cached: :func:`cached_world`); ``who`` names the instrument in the error a
+    site without a crater catalog raises."""
+    return cached_world(_world_site_dir(site, who), utc=scenario.site.epoch_utc,
+                        config=scenario.science, names=names, progress=progress)  # fmt: skip
 
 
 def hydrogen_map(*, scenario, site, progress: bool = False):
@@ -1059,15 +1106,18 @@ __all__ = [
     "WorldModelError",
     "build_world",
     "cached_world",
+    "cached_world_dir",
     "check_layer",
     "compute_world",
     "default_utc",
     "heat_map",
     "hillshade",
     "hydrogen_map",
+    "needs_world",
     "overview",
     "read_craters",
     "read_world_layer",
+    "run_world",
     "stream_world",
     "surface_map",
     "world_key",
