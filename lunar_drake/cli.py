@@ -726,24 +726,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Runs one command; returns the exit status (0, 2 for bad input, 130 interrupted,
-    143 terminated: SIGTERM is taken as Ctrl-C is, partial outputs removed)."""
+    143 terminated: under :func:`run`, SIGTERM is taken as Ctrl-C is, partial outputs
+    removed)."""
     from lunar_drake import interrupts
 
     parser = build_parser()
     args = parser.parse_args(argv)
     sigint = interrupts.LatchedSigint()
-    sigterm = interrupts.TermAsInterrupt()
     try:
         return args.func(args)
     except LunarDrakeError as exc:
         if interrupts.requested():  # Ctrl-C that a library turned into another error
-            return _interrupted(sigterm.received)
+            return _interrupted(interrupts.terminated())
         print(f"lunar-drake: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return _interrupted(sigterm.received)
+        return _interrupted(interrupts.terminated())
     finally:
-        sigterm.restore()
         sigint.restore()
 
 
@@ -759,7 +758,18 @@ def run() -> None:
     or SIGTERM it exits at once (streams flushed) instead of finalizing the interpreter: an
     extension interrupted mid-import (Open3D) can otherwise fail at exit and turn 130
     into 1, or re-raise the interrupt."""
-    code = main()
+    from lunar_drake import interrupts
+
+    sigterm = interrupts.TermAsInterrupt()  # the program's only: main() from Python keeps
+    try:  # the default SIGTERM
+        code = main()
+        if interrupts.terminated() and code not in (130, 143):  # the interrupt was lost
+            print("lunar-drake: terminated", file=sys.stderr)
+            code = 143
+    except KeyboardInterrupt:  # one that came just after main() returned
+        code = _interrupted(interrupts.terminated())
+    finally:
+        sigterm.restore()
     if code in (130, 143):
         sys.stdout.flush()
         sys.stderr.flush()

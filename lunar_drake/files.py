@@ -13,9 +13,11 @@ path and the reason (one line, no traceback at the command line).
 from __future__ import annotations
 
 import contextlib
-import glob
+import hashlib
 import os
+import re
 import shutil
+import socket
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -42,36 +44,44 @@ def temp_sibling(path: str | os.PathLike, *, tag: str = "tmp") -> Path:
     from the extension still work.
     """
     p = Path(path)
-    return p.with_name(f".{p.stem}.{tag}-{os.getpid()}-{uuid.uuid4().hex[:8]}{p.suffix}")
+    return p.with_name(f".{p.stem}.{tag}-{os.getpid()}-{_HOST}{uuid.uuid4().hex[:8]}{p.suffix}")
+
+
+#: This machine in :func:`temp_sibling` names (8 hex digits of its host name's hash), so
+#: that a directory shared between machines is cleaned only of this machine's leftovers.
+_HOST = hashlib.sha1(socket.gethostname().encode()).hexdigest()[:8]
 
 
 def _alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (on this machine)."""
+    """Whether process ``pid`` exists on this machine (in doubt: yes)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except OSError:  # it exists but is not ours
+    except (OSError, OverflowError, ValueError):  # not ours, or not a PID at all
         return True
     return True
 
 
-def remove_stale_siblings(path: str | os.PathLike) -> list[Path]:
-    """Removes the :func:`temp_sibling` directories of directory ``path`` left by
-    processes that no longer run (a build killed outright: SIGKILL, a power cut);
-    returns them. Only while ``path`` itself exists (else one of them may be the only
-    copy); those of a running process, this one's included, are left alone."""
+def remove_stale_siblings(path: str | os.PathLike, *, keep_old: bool = False) -> list[Path]:
+    """Removes the :func:`temp_sibling` directories of ``path`` that this machine's
+    processes left and that no longer run (a build killed outright: SIGKILL, a power
+    cut); returns them. Directories of running processes (this one's included), of other
+    machines (a shared disk) or of other names are left alone, and so are the previous
+    outputs set aside during a swap (``.old-``) while ``path`` itself is missing or
+    ``keep_old``: one of them may be its only copy."""
     p = Path(path)
     removed = []
-    if not p.is_dir():
+    if not p.parent.is_dir():
         return removed
-    for tag in ("tmp", "old"):
-        pattern = f".{glob.escape(p.stem)}.{tag}-*-*{glob.escape(p.suffix)}"
-        for q in p.parent.glob(pattern):
-            pid = q.name[len(f".{p.stem}.{tag}-") :].split("-", 1)[0]
-            if pid.isdigit() and q.is_dir() and not q.is_symlink() and not _alive(int(pid)):
-                shutil.rmtree(q, ignore_errors=True)
-                removed.append(q)
+    tags = "tmp" if keep_old or not p.is_dir() else "tmp|old"
+    name = re.compile(rf"\.{re.escape(p.stem)}\.(?:{tags})-([0-9]{{1,9}})-{_HOST}[0-9a-f]{{8}}"
+                      rf"{re.escape(p.suffix)}")  # fmt: skip
+    for q in p.parent.iterdir():
+        m = name.fullmatch(q.name)
+        if m and q.is_dir() and not q.is_symlink() and not _alive(int(m.group(1))):
+            shutil.rmtree(q, ignore_errors=True)
+            removed.append(q)
     return removed
 
 
@@ -242,8 +252,10 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
     aside, the new one renamed into place and the old one deleted. On an exception
     (``KeyboardInterrupt`` included) the temporary directory is removed, the previous
     ``path`` is untouched, and parent directories created for it are removed again if
-    they are still empty. After a success, what killed processes left beside ``path``
-    goes (:func:`remove_stale_siblings`).
+    they are still empty. Ctrl-C and SIGTERM wait while the two renames run (the main
+    thread's signals are blocked), so an interrupt never leaves ``path`` missing.
+    Before it starts, what killed processes left beside ``path`` goes
+    (:func:`remove_stale_siblings`).
 
     Raises:
         OutputError: ``path`` is a file, or its parent cannot be created or written.
@@ -259,6 +271,7 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
         ) from None
     except OSError as exc:
         raise OutputError(f"cannot write {what} {str(p)!r}: {_reason(exc)}") from None
+    remove_stale_siblings(p)
     tmp = temp_sibling(p)
     try:
         try:
@@ -267,16 +280,17 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
             raise OutputError(f"cannot write {what} {str(p)!r}: {_reason(exc)}") from None
         yield tmp
         old = None
-        if p.exists():
-            old = temp_sibling(p, tag="old")
-            os.rename(p, old)
-        try:
-            os.rename(tmp, p)
-        except BaseException:
-            if old is not None and not p.exists():
-                with contextlib.suppress(OSError):
-                    os.rename(old, p)  # put the previous directory back
-            raise
+        with _signals_held():
+            if p.exists():
+                old = temp_sibling(p, tag="old")
+                os.rename(p, old)
+            try:
+                os.rename(tmp, p)
+            except BaseException:
+                if old is not None and not p.exists():
+                    with contextlib.suppress(OSError):
+                        os.rename(old, p)  # put the previous directory back
+                raise
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_empty(created)
@@ -286,4 +300,23 @@ def staged_directory(path: str | os.PathLike, *, what: str = "output directory")
             _unlink_quietly(old)
         else:
             shutil.rmtree(old, ignore_errors=True)
-    remove_stale_siblings(p)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Blocks SIGINT and SIGTERM in the main thread while the block runs (delivered
+    when it ends); elsewhere, or where the platform has no signal masks, a no-op."""
+    import signal
+    import threading
+
+    held = {signal.SIGINT, signal.SIGTERM}
+    if threading.current_thread() is not threading.main_thread() or not hasattr(
+        signal, "pthread_sigmask"
+    ):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

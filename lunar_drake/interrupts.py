@@ -60,29 +60,46 @@ class LatchedSigint:
                 clear()
 
 
+_terminated = False
+
+
+def terminated() -> bool:
+    """True once a SIGTERM reached a :class:`TermAsInterrupt` handler (until it is
+    restored)."""
+    return _terminated
+
+
 class TermAsInterrupt:
-    """Takes SIGTERM as Ctrl-C (:func:`raise_and_latch`), so that staged outputs are
-    removed as after Ctrl-C; ``received`` tells which it was. Main thread of this
-    process only: a forked child (a drawing worker) gets the default handler back and
-    dies as it would have. ``restore()`` puts the previous handler back."""
+    """Takes SIGTERM as Ctrl-C (:func:`raise_and_latch`) for the ``lunar-drake`` program,
+    so that staged outputs are removed as after Ctrl-C; :func:`terminated` tells which it
+    was. Main thread of this process only, and not where SIGTERM was ignored; a forked
+    child (a drawing worker) gets the default handler back and dies as it would have.
+    ``restore()`` puts the previous handler back."""
 
     def __init__(self) -> None:
-        self.received = False
+        global _terminated
+        _terminated = False
         self._pid = os.getpid()
-        self._installed = threading.current_thread() is threading.main_thread()
-        if self._installed:
-            self._previous = signal.signal(signal.SIGTERM, self._handle)
+        self._installed = False
+        if threading.current_thread() is threading.main_thread():
+            previous = signal.getsignal(signal.SIGTERM)
+            if previous is not signal.SIG_IGN:
+                self._previous = signal.signal(signal.SIGTERM, self._handle)
+                self._installed = True
 
     def _handle(self, signum, frame):
+        global _terminated
         if os.getpid() != self._pid:  # a forked child: die as by default
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             os.kill(os.getpid(), signal.SIGTERM)
             return
-        self.received = True
+        _terminated = True
         raise_and_latch(signum, frame)
 
     def restore(self) -> None:
+        global _terminated
         if self._installed:
             previous = self._previous
             signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
             self._installed = False
+        _terminated = False

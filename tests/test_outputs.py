@@ -431,26 +431,37 @@ def test_sigint_leaves_the_complete_site_or_nothing(tmp_path):
     assert "Traceback" not in err, err  # cli.main reports Ctrl-C in one line
 
 
-def test_stale_staging_directories_go_after_the_next_success(tmp_path):
+def test_stale_staging_directories_go_when_the_next_build_starts(tmp_path):
     """A build killed outright (SIGKILL) leaves its staging directory; the next build
-    into the same place removes it once it has succeeded, but never one of a process
-    that still runs, nor anything while the destination is missing."""
-    from lunar_drake.files import remove_stale_siblings, staged_directory
+    into the same place removes it, but never one of a process that still runs, of
+    another machine (a shared disk), of another name (``world.1``), nor a set-aside
+    previous output (``.old-``) while the destination is missing: it may be the only
+    copy."""
+    from lunar_drake.files import _HOST, remove_stale_siblings, staged_directory
 
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True, check=True)  # fmt: skip
     dead = int(gone.stdout)
     out = tmp_path / "world"
-    stale = [tmp_path / f".world.tmp-{dead}-deadbeef", tmp_path / f".world.old-{dead}-0badf00d"]
-    live = tmp_path / f".world.tmp-{os.getpid()}-c0ffee00"
-    other = tmp_path / f".worlds.tmp-{dead}-deadbeef"  # another destination's
-    for d in (*stale, live, other):
+
+    def stage(name, tag, pid, host=_HOST):
+        d = tmp_path / f".{name}.{tag}-{pid}-{host}deadbeef"
         d.mkdir()
         (d / "part.tif").write_bytes(b"x")
-    assert remove_stale_siblings(out) == []  # no destination yet: maybe the only copy
-    with staged_directory(out) as tmp:
-        (tmp / "a.txt").write_text("done")
-    assert (out / "a.txt").read_text() == "done"
-    assert not any(d.exists() for d in stale)
-    assert live.is_dir() and other.is_dir()
+        return d
 
+    tmp_dead, old_dead = stage("world", "tmp", dead), stage("world", "old", dead)
+    kept = [stage("world", "tmp", os.getpid()), stage("world", "tmp", dead, "0123abcd"),
+            stage("worlds", "tmp", dead)]  # fmt: skip
+    suffixed = tmp_path / f".world.old-{dead}-{_HOST}deadbeef.1"  # world.1's only copy
+    suffixed.mkdir()
+    # No destination yet: the dead build's staging goes, its set-aside output stays.
+    assert remove_stale_siblings(out) == [tmp_dead]
+    with staged_directory(out) as tmp:
+        (tmp / "a.txt").write_text("one")
+    assert old_dead.is_dir()  # still there: the destination did not exist at the start
+    with staged_directory(out) as tmp:
+        (tmp / "a.txt").write_text("two")
+    assert (out / "a.txt").read_text() == "two"
+    assert not old_dead.exists()
+    assert all(k.is_dir() for k in kept) and suffixed.is_dir()

@@ -2,6 +2,7 @@
 patches joined across blocks, and the whole stack built from a DEM read by rows."""
 
 import dataclasses as dc
+import math
 
 import numpy as np
 import pytest
@@ -122,6 +123,48 @@ def test_the_far_field_reaches_each_pixel_at_its_grid_position(azimuth):
     v = centre(np.arange(row0, row0 + rows), na)
     ref = np.array([np.interp(v, np.arange(na), along[:, c]) for c in range(cols)]).T
     np.testing.assert_allclose(t, ref, rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("azimuth", [30.0, 120.0, 210.0, 300.0])
+def test_the_far_field_shades_sector_and_epoch_sweeps(azimuth):
+    """The same plain and far field under a Sun at 10 deg: the epoch's lit fraction is
+    the visible part of the disk above the far horizon (the closed form, against the
+    TANGENT sweep's horizon), and a sector flags a pixel lit exactly where the disk's
+    top clears it."""
+    from lunar_drake.render.lightmap import SUN_ANGULAR_RADIUS_DEG as R_SUN
+    from lunar_drake.science.sweep import EPOCH, SECTOR
+
+    rng = np.random.default_rng(9)
+    k, rows, cols, row0 = 4, 30, 44, 6
+    na, ma = -(-(row0 + rows + 8) // k), -(-cols // k)
+    e = math.radians(10.0)
+    a = np.tan(e + rng.uniform(-0.012, 0.012, size=(na, ma))).astype(np.float32)
+    b = np.zeros((na, ma), np.float32)
+    z = np.zeros((rows, cols))
+    sw = Sweep(z, azimuth_deg=azimuth, resolution_m=0.1)
+    o = sw.orient
+    far = strips.far_field(a, b, k=k, z_ref=0.0, row0=row0, shape=z.shape)
+    t = np.full(z.shape, NO_CASTER, np.float32)
+    sw.run(TANGENT, np.zeros(11), [0.0], o.canon(t), o.canon(t), np.zeros((1, 1), np.uint8),
+           far=far)  # fmt: skip
+    par = sw.sun_par(flux_w_m2=1000.0, mask_deg=-90.0, radius_deg=R_SUN, w_mean=0.1)
+    f, q = np.zeros(z.shape, np.float32), np.zeros(z.shape, np.float32)
+    lit = np.zeros(z.shape, np.uint8)
+    sw.run(EPOCH, par, [10.0], o.canon(f), o.canon(q), o.canon(lit), far=far)
+    r = math.radians(R_SUN)
+    v = np.clip((e - np.arctan(t.astype(np.float64))) / r, -1.0, 1.0)
+    disk = 1.0 - (np.arccos(v) - v * np.sqrt(1.0 - v * v)) / np.pi
+    assert 0.05 < (disk > 0.0).mean() < 0.95 and ((disk > 0.01) & (disk < 0.99)).any()
+    # (The Sun stands up to ~2e-6 rad higher across the 4 m grid, the Moon's curvature,
+    # which the reference leaves out: 5e-4 of the disk at most.)
+    np.testing.assert_allclose(f, disk, atol=5e-4)
+    assert np.array_equal(lit == 1, f > 0)  # lit at the epoch: lit once in the year
+    q_max, q_mean, ever = (np.zeros(z.shape, np.float32), np.zeros(z.shape, np.float32),
+                           np.zeros(z.shape, np.uint8))  # fmt: skip
+    sw.run(SECTOR, par, [10.0, 10.0], o.canon(q_max), o.canon(q_mean), o.canon(ever), far=far)
+    clear = np.abs(np.arctan(t.astype(np.float64)) - (e + r)) > 1e-5
+    assert np.array_equal((ever == 1)[clear], (np.arctan(t) < e + r)[clear])
+    np.testing.assert_allclose(q_max, 1000.0 * f * math.sin(e), rtol=1e-4, atol=1e-3)
 
 
 def test_one_strip_over_the_grid_is_the_whole_grid_sweep_byte_for_byte():

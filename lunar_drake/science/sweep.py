@@ -492,6 +492,11 @@ class Sweep:
             far = FarField(np.zeros((0, 0), np.float32), np.zeros((0, 0), np.float32),
                            np.zeros((2, 0), np.int64), np.zeros(0), 0.0, 0)  # fmt: skip
         o = self.orient
+        grid = o.shape[::-1] if o.transpose else o.shape  # this DEM's grid (rows, cols)
+        if far.a.size and (far.rows != grid[0] or far.index.shape != (2, sum(grid))
+                           or far.weight.shape != (sum(grid),)):  # fmt: skip
+            raise ValueError(f"far field of {far.rows} rows and {far.index.shape[1]} entries "
+                             f"for a grid of {grid}")  # fmt: skip
         f_par = np.array([far.z_ref, float(o.transpose), float(o.flip), far.rows])
         # Chunks differ in work (lines near the corners are short): hand them out one
         # at a time.
