@@ -175,7 +175,7 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
         order = sorted(range(len(jobs)), key=lambda j: (
             sweep_orientation(jobs[j][0], wshape).transpose,
             sweep_orientation(jobs[j][0], wshape).flip))  # fmt: skip
-        zc, key = None, None
+        zc, key, tables = None, None, None
         for j in order:
             az, els, flux, w, epoch = jobs[j]
             o = sweep_orientation(az, wshape)
@@ -196,7 +196,10 @@ def illumination_strips(read_rows, shape, *, resolution_m: float, jobs, config: 
                     region = (0, o.shape[0], *c)
                 else:
                     region = (lo, hi, 0, o.shape[1])
-                ff = far_field(*far[j], k=k, z_ref=z_ref, row0=w0, shape=wshape)
+                # The tables depend on the window only: built once per strip.
+                if tables is None:
+                    tables = far_field(*far[j], k=k, z_ref=z_ref, row0=w0, shape=wshape)
+                ff = tables._replace(a=far[j][0], b=far[j][1])
             a, b = ((acc.lit_now, acc.q_now_w_m2) if epoch
                     else (acc.q_max_w_m2, acc.q_mean_w_m2))  # fmt: skip
             sw.run(EPOCH if epoch else SECTOR, par, els, o.canon(a), o.canon(b),

@@ -916,10 +916,17 @@ def cached_world(
     return {n: read_world_layer(d, n) for n in (names or LAYERS)}
 
 
+#: The sensors (``scenario.sensors.<name>``) that read the site's world model.
+WORLD_SENSORS = ("nss", "nirvss", "drill")
+
+
+def _world_sensors(scenario) -> list[str]:
+    return [n for n in WORLD_SENSORS if getattr(scenario.sensors, n).enabled]
+
+
 def needs_world(scenario) -> bool:
     """Whether a run of ``scenario`` reads the site's world model (a science sensor)."""
-    s = scenario.sensors
-    return bool(s.nss.enabled or s.nirvss.enabled or s.drill.enabled)
+    return bool(_world_sensors(scenario))
 
 
 def _world_site_dir(site, who: str) -> Path:
@@ -936,8 +943,7 @@ def run_world(*, scenario, site, progress: bool = False) -> tuple[Path, bool]:
     """``(directory, was_cached)`` of a run's world model (:func:`cached_world_dir`),
     built now if a science sensor will read it: before the diagram, so a progress bar
     can show it."""
-    who = next(n for n in ("nss", "nirvss", "drill")
-               if getattr(scenario.sensors, n).enabled)  # fmt: skip
+    who = _world_sensors(scenario)[0]
     return cached_world_dir(_world_site_dir(site, f"sensors.{who}"),
                             utc=scenario.site.epoch_utc, config=scenario.science,
                             progress=progress)  # fmt: skip
@@ -1099,6 +1105,7 @@ __all__ = [
     "LAYERS",
     "MODEL_VERSION",
     "WORLD_FILES",
+    "WORLD_SENSORS",
     "ArraySink",
     "Craters",
     "FileSink",
