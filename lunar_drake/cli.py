@@ -329,6 +329,7 @@ def _cmd_world_build(args) -> int:
     from lunar_drake.science.world import build_world
 
     config = WorldConfig()
+    where = "the default world configuration"
     if args.config:
         import yaml
         from pydrake.common.yaml import yaml_load_typed
@@ -356,12 +357,13 @@ def _cmd_world_build(args) -> int:
                 config = yaml_load_typed(schema=WorldConfig, filename=args.config)
             except Exception as exc:  # Drake raises RuntimeError/TypeError on a bad value
                 raise ConfigError(f"{where}: {str(exc).splitlines()[0]}") from None
-        try:
-            config.validate()
-        except LunarDrakeError as exc:
-            raise type(exc)(f"{where}: {exc}") from None
     if args.workers is not None:
         config.workers = args.workers
+        where = f"{where} with --workers {args.workers}" if args.config else "--workers"
+    try:
+        config.validate()
+    except LunarDrakeError as exc:
+        raise type(exc)(f"{where}: {exc}") from None
     if args.utc is not None and not args.utc.strip():
         raise ConfigError("--utc '' is empty; give a UTC time such as 2027-11-15T00:00:00")
     from lunar_drake.files import check_replaceable, staged_directory

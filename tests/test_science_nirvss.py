@@ -74,3 +74,13 @@ def test_noise_in_sunlight_and_under_the_lamp(lit, sigma):
 def test_bad_nirvss_config():
     with pytest.raises(ConfigError, match="mineral_per_wt_pct"):
         nirvss.NIRVSSConfig(mineral_per_wt_pct=[0.1]).validate()
+
+
+def test_drill_samples_hold_no_ice_above_the_dry_layer():
+    from lunar_drake.science.drill import ice_at_depth, read_sample
+
+    g = np.random.default_rng(0)
+    depths = [0.1, 0.2, 0.3, 0.4, 0.5]
+    read = [read_sample(ice_at_depth(0.25, 4.0, d), g, ice_per_wt_pct=0.05, sigma=0.0)
+            for d in depths]  # fmt: skip
+    assert read == pytest.approx([0.0, 0.0, 0.2, 0.2, 0.2])  # 0.05 per wt% below 0.25 m

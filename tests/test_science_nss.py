@@ -99,7 +99,7 @@ def test_the_ground_places_records_with_its_vo_correction_interpolated_in_time()
     from types import SimpleNamespace as NS
 
     from lunar_drake.comms.science import ScienceRecord
-    from lunar_drake.science.products import ground_xy, nss_table
+    from lunar_drake.science.products import ahead, ground_xy, nss_table
 
     # Keyframes at 10 s (shift 1 m east) and 20 s (1 m east, 2 m north, turned 90 deg).
     kf = [NS(t_capture_s=10.0, correction_x_m=1.0, correction_y_m=0.0, correction_yaw_rad=0.0),
@@ -120,3 +120,16 @@ def test_the_ground_places_records_with_its_vo_correction_interpolated_in_time()
     np.testing.assert_allclose(tab.y_m, [0.0, 1.0 + h], atol=1e-12)
     raw = nss_table(recs, config=nss.NSSConfig())
     assert raw.x_m.tolist() == [2.0, 2.0] and raw.y_m.tolist() == [0.0, 0.0]
+    # The heading too (0 on board; turned 45 deg at 15 s): the detector 0.9 m ahead.
+    np.testing.assert_allclose(tab.yaw_rad, [0.0, math.pi / 4], atol=1e-12)
+    dx, dy = ahead(tab.x_m, tab.y_m, tab.yaw_rad, 0.9)
+    np.testing.assert_allclose(dx, [3.9, 1.0 + h + 0.9 / h], atol=1e-12)
+    np.testing.assert_allclose(dy, [0.0, 1.0 + h + 0.9 / h], atol=1e-12)
+
+
+def test_count_rates_are_the_documented_laws():
+    # docs/science.md: epithermal 250 / (1 + 0.2 W), thermal 150 (1 + 0.6 W) / (1 + 0.3 W).
+    cfg = nss.NSSConfig()
+    epi, th = nss.count_rates(np.array([0.0, 1.0, 5.0]), config=cfg)
+    assert epi == pytest.approx([250.0, 250.0 / 1.2, 125.0])
+    assert th == pytest.approx([150.0, 150.0 * 1.6 / 1.3, 150.0 * 4.0 / 2.5])

@@ -62,11 +62,12 @@ def _ray_march(z: np.ndarray, azimuth: float, pixels) -> np.ndarray:
     return np.array(out)
 
 
+@pytest.mark.parametrize("near", [3, 8])  # 3: what the world model's sweeps use
 @pytest.mark.parametrize("azimuth", [33.0, 45.0, 200.0, 301.7])
-def test_any_azimuth_matches_a_ray_march_on_the_bilinear_surface(azimuth):
+def test_any_azimuth_matches_a_ray_march_on_the_bilinear_surface(azimuth, near):
     y, x = np.mgrid[0:64, 0:64]
     z = (np.sin(x / 7.0) * 1.5 + np.cos(y / 5.0)).astype(np.float32).astype(np.float64)
-    t = horizon_tangents(z, azimuth_deg=azimuth, resolution_m=RES)
+    t = horizon_tangents(z, azimuth_deg=azimuth, resolution_m=RES, near=near)
     pixels = [(r, c) for r in range(2, 62, 3) for c in range(2, 62, 3)]
     ref = _ray_march(z, azimuth, pixels)
     got = np.array([t[r, c] for r, c in pixels])
@@ -76,7 +77,10 @@ def test_any_azimuth_matches_a_ray_march_on_the_bilinear_surface(azimuth):
     assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.25, (np.median(err), err.max())
 
 
-def test_agrees_with_the_render_engines_banded_horizons_on_rough_terrain():
+@pytest.mark.parametrize(("near", "p95_deg", "disagree"), [(3, 0.3, 0.007), (8, 0.15, 0.005)])
+def test_agrees_with_the_render_engines_banded_horizons_on_rough_terrain(near, p95_deg, disagree):
+    # near 3 is what the world model's sweeps use (measured: p95 0.25-0.27 deg and
+    # 0.56-0.62 % of cells disagreeing); 8 is horizon_tangents' default.
     # Two independent engines: render.horizon resolves the band by slopes, exact near
     # field; the sweep by hulls. Fractal-like roughness at 4 cm, as the world model sees.
     rng = np.random.default_rng(4)
@@ -87,7 +91,8 @@ def test_agrees_with_the_render_engines_banded_horizons_on_rough_terrain():
     z = np.real(np.fft.ifft2(spec * k**-1.6))
     z = (0.05 * z / z.std()).astype(np.float32).astype(np.float64)  # 5 cm rms
     for az in (7.5, 112.5, 247.5):
-        h_new = np.degrees(np.arctan(horizon_tangents(z, azimuth_deg=az, resolution_m=0.04)))
+        h_new = np.degrees(np.arctan(horizon_tangents(z, azimuth_deg=az, resolution_m=0.04,
+                                                      near=near)))  # fmt: skip
         h_old = horizon_angles(
             z, azimuth_deg=az, resolution_m=0.04, elevation_range_deg=(-1.0, 8.0),
             resolution_deg=0.05,
@@ -96,9 +101,9 @@ def test_agrees_with_the_render_engines_banded_horizons_on_rough_terrain():
         band = (h_old > -0.9) & (h_old < 7.9)
         err = np.abs(np.clip(h_new, -1.0, 8.0) - h_old)[band]
         assert band.mean() > 0.5
-        assert np.percentile(err, 95) < 0.15, (az, np.percentile(err, 95))
+        assert np.percentile(err, 95) < p95_deg, (az, np.percentile(err, 95))
         lit_new, lit_old = h_new < 3.0, h_old < 3.0
-        assert np.mean(lit_new != lit_old) < 0.005, az
+        assert np.mean(lit_new != lit_old) < disagree, az
 
 
 def test_chunking_never_changes_a_byte():

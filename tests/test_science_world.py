@@ -118,7 +118,7 @@ def test_temperature_is_radiative_equilibrium_facing_the_sun():
     assert expected == pytest.approx(386.2, abs=0.1)
     inner = t[8:-8, 8:-8]
     assert np.allclose(inner, expected, atol=0.05)
-    assert view[8:-8, 8:-8].max() < 1e-3  # the 0.5 deg horizon resolution
+    assert view[8:-8, 8:-8].max() < 1e-3  # a plane sees no terrain above its horizon
 
 
 def test_shadow_is_warmed_by_sunlit_terrain(bowl_world):
@@ -131,6 +131,28 @@ def test_shadow_is_warmed_by_sunlit_terrain(bowl_world):
     floor = (0.016 / (0.95 * 5.670374419e-8)) ** 0.25
     assert cold.min() == pytest.approx(floor) and cold.max() < floor + 0.5  # geothermal: ~23 K
     assert warm[N // 2, N // 2 + 20] > floor + 20  # the bowl's wall sees the lit plain
+
+
+def test_a_pit_floor_gets_its_view_factor_of_the_terrains_light():
+    # A conical pit (floor of radius 2 m, rim 10 m away and 4 m up): from the floor's
+    # centre the rim is the horizon at every azimuth, h = atan(4 / 10), so the
+    # cosine-weighted view factor is sin^2 h = 0.16 / 1.16. Terrain of absorbed flux S
+    # around it: eps sigma T^4 = F ((eps + A) S + eps q_geo) + q_geo (docs/science.md).
+    res, n = 0.5, 160
+    y, x = (np.mgrid[0:n, 0:n] - (n - 1) / 2.0) * res
+    r = np.hypot(x, y)
+    z = np.clip(0.5 * (r - 2.0), 0.0, 4.0)
+    cfg = ThermalConfig()
+    sin2_h = thermal.sky_horizons(z, resolution_m=res, config=cfg)
+    k = thermal.coarse_factor(res, cfg)
+    s0 = 200.0
+    src = np.full((1, *sin2_h.shape[1:]), s0)
+    t = thermal.temperature_rows(z, np.zeros((1, n, n)), src, sin2_h, resolution_m=res,
+                                 rows=range(n), config=cfg)[0]  # fmt: skip
+    eps, a, q_geo = cfg.emissivity, cfg.bond_albedo, cfg.geothermal_w_m2
+    centre = t[n // 2 - 1 : n // 2 + 1, n // 2 - 1 : n // 2 + 1].mean()
+    f = (eps * 5.670374419e-8 * centre**4 - q_geo) / ((eps + a) * s0 + eps * q_geo)
+    assert k == 1 and f == pytest.approx(0.16 / 1.16, rel=0.03)
 
 
 def test_oh_follows_temperature():
@@ -544,3 +566,52 @@ def test_heat_maps_drawn_in_forked_processes_are_the_same_bytes(tmp_path):
 
 def _write_pid(path) -> None:
     path.write_text(str(os.getpid()))
+
+
+def test_envelope_bins_samples_in_grid_azimuth():
+    # True azimuth A lies at grid azimuth A + grid_north_deg (the grid's north is turned).
+    env = envelope_from_samples([10.0, 10.0, 200.0], [1.0, 3.0, 2.0], [1.5e8, 1.5e8, 1.5e8],
+                                bins=12, grid_north_deg=30.0)  # fmt: skip
+    assert env.el_max_deg[40 // 30] == 3.0  # 10 + 30 = 40 deg: the sector 30-60
+    assert env.el_max_deg[230 // 30] == 2.0
+    assert env.weight[1] == pytest.approx(2 / 3) and env.weight[7] == pytest.approx(1 / 3)
+    assert np.count_nonzero(env.weight) == 2
+
+
+def test_mean_flux_is_the_average_over_the_suns_samples():
+    # A flat plain: every sample's Sun is wholly up, so the year's mean absorbed flux is
+    # the plain average over the samples of (1 - A) S / d^2 sin(e), computed here
+    # directly from the samples (not from the sectors' quantile levels).
+    rng = np.random.default_rng(3)
+    n = 4000
+    az = rng.uniform(0.0, 360.0, n)
+    el = 1.0 + 2.5 * (0.5 + 0.5 * np.sin(np.radians(3.0 * az)))  # 1-3.5 deg
+    d_km = 1.496e8 * (1.0 + 0.01 * np.cos(np.radians(az)))
+    env = envelope_from_samples(az, el, d_km, bins=24)
+    cfg = ThermalConfig()
+    z = np.zeros((48, 48))
+    il = thermal.illumination(z, resolution_m=1.0, envelope=env, sun_azimuth_deg=0.0,
+                              sun_elevation_deg=2.0, config=cfg)  # fmt: skip
+    d_au = d_km / 149_597_870.7
+    direct = np.mean((1.0 - cfg.bond_albedo) * cfg.solar_constant_w_m2 / d_au**2
+                     * np.sin(np.radians(el)))  # fmt: skip
+    assert np.allclose(il.q_mean_w_m2, direct, rtol=5e-3)
+    peak = (1.0 - cfg.bond_albedo) * cfg.solar_constant_w_m2 * np.sin(np.radians(el.max()))
+    assert il.q_max_w_m2.max() == pytest.approx(peak, rel=0.02)
+
+
+def test_ice_of_several_craters_of_different_ages():
+    cfg = IceConfig(min_crater_m=5.0)
+    craters = Craters(x_m=np.array([-10.0, 12.0, 0.0]), y_m=np.array([0.0, 4.0, -14.0]),
+                      diameter_m=np.array([8.0, 12.0, 3.0]),
+                      age_yr=np.array([0.2, 1.5, 0.0]) * cfg.age_scale_yr)  # fmt: skip
+    res = 0.5
+    f = volatiles.rim_factor((80, 80), resolution_m=res, x0_m=-20.0, y1_m=20.0,
+                             craters=craters, config=cfg)  # fmt: skip
+    for r, c in [(40, 20), (30, 64), (52, 40), (70, 40), (5, 5), (40, 44)]:
+        x, y = -20.0 + (c + 0.5) * res, 20.0 - (r + 0.5) * res
+        keep = 1.0
+        for cx, cy, dk, age in [(-10.0, 0.0, 8.0, 0.2), (12.0, 4.0, 12.0, 1.5)]:  # not the 3 m
+            dist = abs(math.hypot(x - cx, y - cy) - dk / 2)
+            keep *= 1.0 - math.exp(-age) * math.exp(-dist / (cfg.falloff_radii * dk / 2))
+        assert f[r, c] == pytest.approx(1.0 - keep, rel=1e-9, abs=1e-12)

@@ -23,7 +23,9 @@ class SunEnvelopeConfig:
         azimuth_bins: azimuth sectors (-), [4, 360]; each is one horizon computation at
             its centre (the Sun's azimuth is quantised to the sector: an approximation
             for shadow edges that run along the Sun's direction).
-        horizon_resolution_deg: horizon elevation resolution (deg), (0, 1].
+        horizon_resolution_deg: unused since the hull sweep computes exact horizons
+            (deg), (0, 1]; kept so that older scenario files still load, and not part of
+            the world model's cache key.
     """
 
     years: float = 1.0
@@ -56,8 +58,9 @@ class ThermalConfig:
     shadowed temperatures, ``Q_env = F (emissivity M_ir + (1 - bond_albedo) M_vis)``:
     ``F`` the cosine-weighted view factor of the terrain above each cell's horizon
     (``mean sin^2(h)`` over ``view_azimuths`` azimuths), ``M_ir`` and ``M_vis`` the
-    thermal emission and scattered sunlight of the terrain averaged over a disk of
-    ``env_radius_m`` (not ray-traced: every cell of the disk counts, seen or not).
+    thermal emission and scattered sunlight of the terrain averaged over the square of
+    half-side ``env_radius_m`` around the cell (not ray-traced: every cell of it counts,
+    seen or not).
 
     Attributes:
         bond_albedo: bolometric Bond albedo (-), [0, 1); 0.12 (Vasavada et al. 2012,

@@ -26,14 +26,15 @@ from lunar_drake.science.nss import NSSConfig, footprint_weh, weh_from_epitherma
 class NSSTable:
     """Received NSS records (arrays of equal length, sample order).
 
-    Attributes: t_sample_s, x_m, y_m (the ground's placing: the on-board estimate, VO
-    corrected when the ground's perception ran), epithermal, thermal (counts),
-    integration_s, weh_est (wt%, the ground's inversion).
+    Attributes: t_sample_s, x_m, y_m, yaw_rad (the ground's placing of the chassis: the
+    on-board estimate, VO corrected when the ground's perception ran), epithermal,
+    thermal (counts), integration_s, weh_est (wt%, the ground's inversion).
     """
 
     t_sample_s: np.ndarray
     x_m: np.ndarray
     y_m: np.ndarray
+    yaw_rad: np.ndarray
     epithermal: np.ndarray
     thermal: np.ndarray
     integration_s: np.ndarray
@@ -44,21 +45,34 @@ class NSSTable:
 
 
 def ground_xy(t_s, x_m, y_m, keyframes=()) -> tuple[np.ndarray, np.ndarray]:
-    """On-board positions (site m) at times ``t_s`` (s) where the ground places them:
+    """:func:`ground_pose`'s positions."""
+    return ground_pose(t_s, x_m, y_m, np.zeros(np.shape(x_m)), keyframes)[:2]
+
+
+def ground_pose(t_s, x_m, y_m, yaw_rad, keyframes=()) -> tuple:
+    """On-board poses (site m, rad) at times ``t_s`` (s) where the ground places them:
     moved by its VO correction (:class:`~lunar_drake.perception.ground_pipeline.
     KeyframeRecord` ``correction_*``; ``p' = Rz(yaw) p + (x, y)``), interpolated linearly
     in time between keyframes (drift grows between them: an approximation), the first
-    keyframe's before it, the last one's after it. Without keyframes, unchanged."""
+    keyframe's before it, the last one's after it. Without keyframes, unchanged.
+    Returns ``(x, y, yaw)``."""
     t = np.asarray(t_s, np.float64)
     x, y = np.asarray(x_m, np.float64), np.asarray(y_m, np.float64)
+    yaw = np.asarray(yaw_rad, np.float64)
     if not len(keyframes):
-        return x.copy(), y.copy()
+        return x.copy(), y.copy(), yaw.copy()
     tk = np.array([k.t_capture_s for k in keyframes], np.float64)
     dx, dy = (np.interp(t, tk, [getattr(k, f) for k in keyframes])
               for f in ("correction_x_m", "correction_y_m"))  # fmt: skip
     dyaw = np.interp(t, tk, np.unwrap([k.correction_yaw_rad for k in keyframes]))
     c, s = np.cos(dyaw), np.sin(dyaw)
-    return c * x - s * y + dx, s * x + c * y + dy
+    return c * x - s * y + dx, s * x + c * y + dy, yaw + dyaw
+
+
+def ahead(x_m, y_m, yaw_rad, distance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The points ``distance_m`` ahead of chassis poses (an instrument's footprint)."""
+    return (np.asarray(x_m) + distance_m * np.cos(yaw_rad),
+            np.asarray(y_m) + distance_m * np.sin(yaw_rad))  # fmt: skip
 
 
 def nss_table(science_received, *, config: NSSConfig, keyframes=()) -> NSSTable:
@@ -67,14 +81,14 @@ def nss_table(science_received, *, config: NSSConfig, keyframes=()) -> NSSTable:
     recs = [r for _t, r in science_received if r.instrument == "nss"]
     if not recs:
         e = np.zeros(0)
-        return NSSTable(e, e, e, e, e, e, e)
+        return NSSTable(e, e, e, e, e, e, e, e)
     t = np.array([r.t_sample_s for r in recs])
-    x, y = ground_xy(t, [r.pose_estimate[0] for r in recs],
-                     [r.pose_estimate[1] for r in recs], keyframes)  # fmt: skip
+    x, y, yaw = ground_pose(t, *([r.pose_estimate[i] for r in recs] for i in (0, 1, 5)),
+                            keyframes)  # fmt: skip
     epi = np.array([r.values[0] for r in recs], np.float64)
     th = np.array([r.values[1] for r in recs], np.float64)
     dt = np.array([r.integration_s for r in recs])
-    return NSSTable(t, x, y, epi, th, dt, weh_from_epithermal(epi, dt, config=config))
+    return NSSTable(t, x, y, yaw, epi, th, dt, weh_from_epithermal(epi, dt, config=config))
 
 
 def grid_mean(x, y, values, *, cell_m: float, origin=(0.0, 0.0)) -> dict:
@@ -105,11 +119,11 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     xt = np.interp(table.t_sample_s, tt, p[:, 0])
     yt = np.interp(table.t_sample_s, tt, p[:, 1])
     yaw = np.interp(table.t_sample_s, tt, np.unwrap(p[:, 2]))
-    xd, yd = xt + config.x_m * np.cos(yaw), yt + config.x_m * np.sin(yaw)
+    xd, yd = ahead(xt, yt, yaw, config.x_m)
     truth = np.array([footprint_weh(hmap, float(a), float(b), config=config)
                       for a, b in zip(xd, yd, strict=True)])  # fmt: skip
-    xe = table.x_m + config.x_m * np.cos(yaw)
-    ye = table.y_m + config.x_m * np.sin(yaw)
+    # Binned where the ground puts the detector: its own pose estimate, heading included.
+    xe, ye = ahead(table.x_m, table.y_m, table.yaw_rad, config.x_m)
     est = grid_mean(xe, ye, table.weh_est, cell_m=cell_m)
     tru = grid_mean(xe, ye, truth, cell_m=cell_m)
     keys = sorted(k for k, (_m, c) in est.items() if c >= min_records)
@@ -188,12 +202,15 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
     recs = {}
     keyframes = getattr(logs, "keyframes", None) or ()
     nss = nss_table(logs.science_received, config=scenario.sensors.nss, keyframes=keyframes)
-    if len(nss):
-        recs["nss"] = (nss.x_m, nss.y_m, nss.weh_est)
+    if len(nss):  # each record where the ground puts the instrument's footprint
+        recs["nss"] = (*ahead(nss.x_m, nss.y_m, nss.yaw_rad, scenario.sensors.nss.x_m),
+                       nss.weh_est)  # fmt: skip
     nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
     if nir:
-        nx, ny = ground_xy([r.t_sample_s for r in nir], [r.pose_estimate[0] for r in nir],
-                           [r.pose_estimate[1] for r in nir], keyframes)  # fmt: skip
+        nx, ny, nyaw = ground_pose([r.t_sample_s for r in nir],
+                                   *([r.pose_estimate[i] for r in nir] for i in (0, 1, 5)),
+                                   keyframes)  # fmt: skip
+        nx, ny = ahead(nx, ny, nyaw, scenario.sensors.nirvss.x_m)
         vals = np.array([r.values for r in nir])
         recs["nirvss"] = (nx, ny, vals[:, :-1])
         recs["lcs"] = (nx, ny, vals[:, -1])
@@ -267,8 +284,10 @@ __all__ = [
     "MAPS",
     "Grid",
     "NSSTable",
+    "ahead",
     "grid_mean",
     "grid_records",
+    "ground_pose",
     "ground_xy",
     "nss_table",
     "nss_truth",

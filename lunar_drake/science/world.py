@@ -141,10 +141,12 @@ def read_craters(path) -> Craters:
         raise WorldModelError(f"{str(p)!r} is not a numeric crater table: {exc}") from None
     cols = {c: data[:, header.index(c)] if data.size else np.zeros(0) for c in need}
     bad = ~np.isfinite(np.column_stack(list(cols.values()))).all(axis=1) if data.size else []
-    if np.any(bad) or (data.size and (cols["diameter_m"] <= 0).any()):
-        row = int(np.argmax(bad)) if np.any(bad) else int(np.argmax(cols["diameter_m"] <= 0))
+    if np.any(bad) or (data.size and ((cols["diameter_m"] <= 0) | (cols["age_yr"] < 0)).any()):
+        wrong = (cols["diameter_m"] <= 0) | (cols["age_yr"] < 0) if data.size else bad
+        row = int(np.argmax(bad)) if np.any(bad) else int(np.argmax(wrong))
         raise WorldModelError(
-            f"{str(p)!r} row {row + 2}: crater values must be finite with diameter_m > 0"
+            f"{str(p)!r} row {row + 2}: crater values must be finite with diameter_m > 0 "
+            "and age_yr >= 0"
         )
     return Craters(**cols)
 
@@ -878,6 +880,7 @@ def world_key(site_dir, *, utc: str, config: WorldConfig) -> str:
         ) from None
     cfg = dc.asdict(config)
     cfg.pop("tile_px"), cfg.pop("workers")
+    cfg["sun"].pop("horizon_resolution_deg")  # read by nothing (kept for older files)
     text = json.dumps(
         {"site": site_text, "utc": utc, "config": cfg, "layers": list(LAYERS),
          "model": MODEL_VERSION},
