@@ -537,7 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="skip the Hapke stereo cameras (sets sensors.camera.enabled: false)",
     )
     r.add_argument(
-        "--soil", default=None, help="soil preset (lunar_regolith, grc1) or a soil YAML file"
+        "--soil", default=None, help="soil preset (lunar_regolith, grc1, jsc1a) or a soil YAML file"
     )
     r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -744,6 +744,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return _interrupted(interrupts.terminated())
+    except Exception:
+        # Ctrl-C during an import (pydrake's, Open3D's) surfaces as another error
+        # ("ImportError: initialization failed"): it was the interrupt all the same.
+        if interrupts.requested():
+            return _interrupted(interrupts.terminated())
+        raise
     finally:
         sigint.restore()
 
@@ -768,8 +774,12 @@ def run() -> None:
         if interrupts.terminated() and code not in (130, 143):  # the interrupt was lost
             print("lunar-drake: terminated", file=sys.stderr)
             code = 143
+        sys.stdout.flush()
     except KeyboardInterrupt:  # one that came just after main() returned
         code = _interrupted(interrupts.terminated())
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = 141  # 128 + SIGPIPE, as a shell reports it
     finally:
         sigterm.restore()
     if code in (130, 143):

@@ -88,8 +88,28 @@ _YAML_FLOATS = {".nan", ".inf", "+.inf", "-.inf"}
 
 def _check_scalar(node, schema, path: str, source: str) -> None:
     """Raises ConfigError, naming ``path``, for a scalar that is not a number where
-    ``schema`` (float or int) wants one."""
-    if schema not in (float, int) or not isinstance(node, yaml.ScalarNode):
+    ``schema`` (float or int) wants one, not true or false where it wants a bool, or an
+    unquoted number or boolean where it wants text; and for a value that is not a list
+    where it wants one."""
+    if typing.get_origin(schema) is list and not isinstance(node, yaml.SequenceNode):
+        if not (isinstance(node, yaml.ScalarNode) and node.tag.endswith(":null")):
+            shown = node.value if isinstance(node, yaml.ScalarNode) else "a mapping"
+            raise ConfigError(f"{_where(source, node)}: {path} must be a list ([...]), "
+                              f"not {shown!r}")  # fmt: skip
+        return
+    if not isinstance(node, yaml.ScalarNode):
+        return
+    if schema is bool:
+        if not node.tag.endswith(":bool"):
+            raise ConfigError(f"{_where(source, node)}: {path} = {node.value!r} must be true "
+                              "or false")  # fmt: skip
+        return
+    if schema is str:
+        if node.style is None and node.tag.rsplit(":", 1)[-1] in ("int", "float", "bool"):
+            raise ConfigError(f"{_where(source, node)}: {path} = {node.value!r} must be text "
+                              "(quote it)")  # fmt: skip
+        return
+    if schema not in (float, int):
         return
     text = str(node.value).strip()
     if schema is int:

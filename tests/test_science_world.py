@@ -3,6 +3,7 @@
 import json
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -615,3 +616,32 @@ def test_ice_of_several_craters_of_different_ages():
             dist = abs(math.hypot(x - cx, y - cy) - dk / 2)
             keep *= 1.0 - math.exp(-age) * math.exp(-dist / (cfg.falloff_radii * dk / 2))
         assert f[r, c] == pytest.approx(1.0 - keep, rel=1e-9, abs=1e-12)
+
+
+def _write_handlers(path) -> None:
+    import signal
+
+    Path(path).write_text(f"{signal.getsignal(signal.SIGTERM)!r}|"
+                          f"{signal.getsignal(signal.SIGINT)!r}")  # fmt: skip
+
+
+def test_drawing_workers_die_on_sigterm_and_leave_ctrl_c_to_the_parent(tmp_path):
+    # The program takes SIGTERM in Python; a forked drawing worker must not inherit that
+    # (the pool's terminate() would then wait on Python code in a worker blocked on a
+    # queue lock: a build that never returned).
+    import signal
+    import threading
+
+    from lunar_drake.science import world as w
+
+    if [t for t in threading.enumerate()
+            if t is not threading.current_thread() and t.name != "tqdm_monitor"]:  # fmt: skip
+        pytest.skip("another thread runs: the figures would be drawn here")
+    previous = signal.signal(signal.SIGTERM, lambda *_: None)
+    try:
+        w._draw([(_write_handlers, (tmp_path / f"h{i}",), {}) for i in range(2)], workers=2)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    for i in range(2):
+        term, intr = (tmp_path / f"h{i}").read_text().split("|")
+        assert term == repr(signal.SIG_DFL) and intr == repr(signal.SIG_IGN)

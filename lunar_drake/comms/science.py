@@ -17,7 +17,8 @@ class ScienceRecord:
 
     Attributes:
         instrument: ``"nss"``. index: the instrument's sample index.
-        t_sample_s: when the sample was taken (s, simulation time).
+        t_sample_s: when the sample was taken (s, simulation time; for counts, the end
+            of the ``integration_s`` they cover, drawn for the footprint at that instant).
         values: the instrument's values (NSS: epithermal and thermal counts).
         integration_s: the integration time (s).
         pose_estimate: the on-board estimate (x, y, z, roll, pitch, yaw; m, rad) at the

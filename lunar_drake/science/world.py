@@ -630,8 +630,9 @@ def build_world(
     site_dir = Path(site_dir)
     dem = site_dir / "dem.tif"
     if not site_dir.is_dir():
+        what = "is a file, not a site directory" if site_dir.exists() else "does not exist"
         raise RasterNotFoundError(
-            f"site {str(site_dir)!r} does not exist (a site directory from 'lunar-drake "
+            f"site {str(site_dir)!r} {what} (a site directory from 'lunar-drake "
             "terrain synth' is needed)"
         )
     if not dem.is_file():
@@ -795,6 +796,16 @@ def _finish_world(out: Path, sink: FileSink, *, z, resolution_m, utc, envelope,
 _FIGURES: list = []
 
 
+def _drawing_child() -> None:
+    """A drawing worker's signals: SIGTERM kills it at once (the pool's terminate() must
+    not wait on Python code in a child blocked on a queue lock) and Ctrl-C is left to the
+    parent, which terminates the pool."""
+    import signal
+
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _draw_one(i: int) -> None:
     fn, args, kwargs = _FIGURES[i]
     fn(*args, **kwargs)
@@ -819,8 +830,16 @@ def _draw(figures: list, *, workers: int) -> None:
 
     _FIGURES[:] = figures  # the children inherit it; nothing is pickled but indices
     try:
-        with mp.get_context("fork").Pool(min(workers, len(figures))) as pool:
+        pool = mp.get_context("fork").Pool(min(workers, len(figures)),
+                                           initializer=_drawing_child)  # fmt: skip
+        try:
             pool.map(_draw_one, range(len(figures)), chunksize=1)
+            pool.close()  # the workers leave by themselves once the queue is done
+        except BaseException:
+            pool.terminate()
+            raise
+        finally:
+            pool.join()
     finally:
         _FIGURES.clear()
 

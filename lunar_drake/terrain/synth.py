@@ -288,7 +288,8 @@ def _check_site_dir(out_dir: Path) -> None:
         shown = ", ".join(repr(n) for n in foreign[:3]) + (", ..." if len(foreign) > 3 else "")
         raise OutputError(
             f"cannot write site directory {str(out_dir)!r}: it exists and holds "
-            f"{len(foreign)} entries that are not site outputs ({shown}); a site directory "
+            f"{len(foreign)} {'entry that is' if len(foreign) == 1 else 'entries that are'} "
+            f"not a site output ({shown}); a site directory "
             "is replaced as a whole, so give a new or empty directory"
         )
 
