@@ -364,6 +364,8 @@ def _cmd_world_build(args) -> int:
         config.validate()
     except LunarDrakeError as exc:
         raise type(exc)(f"{where}: {exc}") from None
+    if args.seed is not None and not 0 <= args.seed < 2**63:
+        raise ConfigError(f"--seed {args.seed} is out of range; allowed [0, 2^63 - 1]")
     if args.utc is not None and not args.utc.strip():
         raise ConfigError("--utc '' is empty; give a UTC time such as 2027-11-15T00:00:00")
     from lunar_drake.files import check_replaceable, staged_directory

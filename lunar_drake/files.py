@@ -222,6 +222,8 @@ def check_replaceable(path: str | os.PathLike, *, allowed, what: str) -> None:
         OutputError: naming the path and a few of the foreign entries.
     """
     p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"cannot write {what} {str(p)!r}: it is a file, not a directory")
     if not p.is_dir():
         return
     try:

@@ -242,7 +242,7 @@ def test_terrain_synth_refuses_to_replace_a_folder_of_other_files(tmp_path, caps
     assert main([*argv, "--no-progress"]) == 2
     err = capsys.readouterr().err
     _one_line_error(err, tmp_path)
-    assert "not site outputs" in err and "notes.txt" in err
+    assert "not a site output" in err and "notes.txt" in err
     assert _snapshot(tmp_path) == before
 
 

@@ -313,3 +313,17 @@ def test_ctrl_c_during_an_import_is_an_interrupt_not_a_traceback(monkeypatch, ca
     monkeypatch.setattr(cli, "_cmd_world_build", failing_import)  # no Ctrl-C: a real error
     with pytest.raises(ImportError):
         main(["world", "build", str(tmp_path), "--out", str(tmp_path / "w")])
+
+
+def test_an_output_path_that_is_a_file_and_a_negative_seed_are_refused(tmp_path, capsys):
+    f = tmp_path / "afile"
+    f.write_text("keep me")
+    for argv in (["run", "--scenario", "small", "--no-meshcat", "--out", str(f)],
+                 ["world", "build", str(tmp_path), "--out", str(f)]):  # fmt: skip
+        assert main(argv) == 2
+        assert "it is a file, not a directory" in capsys.readouterr().err
+    assert f.read_text() == "keep me"
+    out = str(tmp_path / "w")
+    assert main(["world", "build", str(tmp_path), "--out", out, "--seed", "-1"]) == 2
+    assert "--seed -1 is out of range" in capsys.readouterr().err
+    assert not (tmp_path / "w").exists()

@@ -131,8 +131,9 @@ class FrostConfig:
 
     ``frost = max_area_frac (1 - exp(-A / area_scale_m2))`` in a permanently shadowed
     patch of area ``A`` (8-connected cells) whose maximum temperature is below the ice
-    stability temperature, 0 elsewhere: larger cold traps are colder and hold more ice
-    (Hayne et al. 2021, Nature Astronomy 5, 169); the form is ours.
+    stability temperature, 0 elsewhere. The growth with area is our assumption (Hayne et
+    al. 2021, Nature Astronomy 5, 169, find cold traps down to about 1 cm, their
+    temperatures set mostly by shape and latitude); the form is ours.
 
     Attributes:
         max_area_frac: area fraction of the largest patches (-), [0, 1].
