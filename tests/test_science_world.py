@@ -3,7 +3,6 @@
 import json
 import math
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -618,30 +617,31 @@ def test_ice_of_several_craters_of_different_ages():
         assert f[r, c] == pytest.approx(1.0 - keep, rel=1e-9, abs=1e-12)
 
 
-def _write_handlers(path) -> None:
-    import signal
+_HANDLERS_CHILD = """
+import signal, sys
+from pathlib import Path
+from lunar_drake.science import world as w
 
+def write(path):
     Path(path).write_text(f"{signal.getsignal(signal.SIGTERM)!r}|"
-                          f"{signal.getsignal(signal.SIGINT)!r}")  # fmt: skip
+                          f"{signal.getsignal(signal.SIGINT)!r}")
+
+signal.signal(signal.SIGTERM, lambda *_: None)  # as the program takes SIGTERM in Python
+w._draw([(write, (f"{sys.argv[1]}/h{i}",), {}) for i in range(2)], workers=2)
+"""
 
 
 def test_drawing_workers_die_on_sigterm_and_leave_ctrl_c_to_the_parent(tmp_path):
-    # The program takes SIGTERM in Python; a forked drawing worker must not inherit that
-    # (the pool's terminate() would then wait on Python code in a worker blocked on a
-    # queue lock: a build that never returned).
+    # A forked drawing worker must not inherit the program's Python SIGTERM handler (the
+    # pool's terminate() would then wait on Python code in a worker blocked on a queue
+    # lock: a build that never returned). In a fresh interpreter, where no other thread
+    # runs and the figures are drawn by forked workers.
     import signal
-    import threading
+    import subprocess
+    import sys
 
-    from lunar_drake.science import world as w
-
-    if [t for t in threading.enumerate()
-            if t is not threading.current_thread() and t.name != "tqdm_monitor"]:  # fmt: skip
-        pytest.skip("another thread runs: the figures would be drawn here")
-    previous = signal.signal(signal.SIGTERM, lambda *_: None)
-    try:
-        w._draw([(_write_handlers, (tmp_path / f"h{i}",), {}) for i in range(2)], workers=2)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    subprocess.run([sys.executable, "-c", _HANDLERS_CHILD, str(tmp_path)], check=True,
+                   timeout=120)  # fmt: skip
     for i in range(2):
         term, intr = (tmp_path / f"h{i}").read_text().split("|")
         assert term == repr(signal.SIG_DFL) and intr == repr(signal.SIG_IGN)
