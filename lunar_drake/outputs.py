@@ -111,7 +111,7 @@ NSS_COLUMNS = ["t_received_s", "t_sample_s", "index", "epithermal_counts", "ther
 
 #: ``nirvss.csv`` columns: times (s), index, the band depths (-) of
 #: :data:`lunar_drake.science.nirvss.BANDS`, the on-board pose estimate (m, m, rad).
-#: ``lcs.csv``: times, index, the LCS surface temperature (K), the estimate (m, m).
+#: ``lcs.csv``: times, index, the LCS surface temperature (K), the estimate (m, m, rad).
 def _nirvss_columns() -> list[str]:
     from lunar_drake.science.nirvss import BANDS
 
@@ -119,11 +119,13 @@ def _nirvss_columns() -> list[str]:
             "y_est_m", "yaw_est_rad"]  # fmt: skip
 
 
-LCS_COLUMNS = ["t_received_s", "t_sample_s", "index", "temperature_K", "x_est_m", "y_est_m"]
+LCS_COLUMNS = ["t_received_s", "t_sample_s", "index", "temperature_K", "x_est_m", "y_est_m",
+               "yaw_est_rad"]  # fmt: skip
 #: ``drill.csv``: reception and sample times (s), the sample number, its depth (m), its
-#: NIRVSS ice band depth (-), the ground's ice from it (wt%), the on-board estimate (m).
+#: NIRVSS ice band depth (-), the ground's ice from it (wt%), the on-board estimate of
+#: the chassis (m, m, rad) and of the hole (``sensors.drill.x_m`` ahead of it, m).
 DRILL_COLUMNS = ["t_received_s", "t_sample_s", "sample", "depth_m", "bd_ice", "ice_est_wt_pct",
-                 "x_est_m", "y_est_m"]  # fmt: skip
+                 "x_est_m", "y_est_m", "yaw_est_rad", "hole_x_est_m", "hole_y_est_m"]  # fmt: skip
 
 
 def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs,
@@ -136,9 +138,12 @@ def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs,
     paths = []
     if scenario.sensors.drill.enabled:
         k_ice = scenario.sensors.nirvss.ice_per_wt_pct
+        hole = scenario.sensors.drill.x_m
         rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(int(r.values[0])), _fmt(r.values[1]),
                  _fmt(r.values[2]), _fmt(r.values[2] / k_ice if k_ice > 0 else math.nan),
-                 _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1])]
+                 *(_fmt(r.pose_estimate[i]) for i in (0, 1, 5)),
+                 _fmt(r.pose_estimate[0] + hole * math.cos(r.pose_estimate[5])),
+                 _fmt(r.pose_estimate[1] + hole * math.sin(r.pose_estimate[5]))]
                 for t, r in logs.science_received if r.instrument == "drill")  # fmt: skip
         write_csv(out / "drill.csv", DRILL_COLUMNS, rows)
         paths.append(out / "drill.csv")
@@ -149,7 +154,7 @@ def write_science(out: Path, *, scenario: Scenario, logs: SimulationLogs,
                 for t, r in nir)  # fmt: skip
         write_csv(out / "nirvss.csv", _nirvss_columns(), rows)
         rows = ([f"{t:.6f}", f"{r.t_sample_s:.6f}", str(r.index), _fmt(r.values[-1]),
-                 _fmt(r.pose_estimate[0]), _fmt(r.pose_estimate[1])] for t, r in nir)  # fmt: skip
+                 *(_fmt(r.pose_estimate[i]) for i in (0, 1, 5))] for t, r in nir)  # fmt: skip
         write_csv(out / "lcs.csv", LCS_COLUMNS, rows)
         paths += [out / "nirvss.csv", out / "lcs.csv"]
     if scenario.sensors.nss.enabled:

@@ -2,6 +2,7 @@
 only through the downlink (seams, nss.csv, scoring)."""
 
 import csv
+import math
 
 import numpy as np
 import pytest
@@ -79,19 +80,32 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
     outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall, site=site)
     import rasterio
 
-    for stem, n_bands in (("nss_map", 1), ("nirvss_map", 7), ("lcs_map", 1)):
+    for stem, n_bands, n_records in (("nss_map", 3, len(recs)), ("nirvss_map", 8, len(nir)),
+                                     ("lcs_map", 2, len(nir))):  # fmt: skip
         assert (tmp_path / f"{stem}.png").stat().st_size > 1000
         with rasterio.open(tmp_path / f"{stem}.tif") as ds:
             assert ds.count == n_bands and ds.crs is not None and ds.res == (2.0, 2.0)
+            assert ds.descriptions[-1] == "records"
             a = ds.read()
-        assert np.isfinite(a).any() and np.isnan(a).any()  # cells with and without records
+        assert np.isfinite(a[0]).any() and np.isnan(a[0]).any()  # cells with and without
+        assert a[-1].sum() == n_records and np.isnan(a[0][a[-1] == 0]).all()
     ox, oy = site.heightfield.origin_xy
+    cfg = s.sensors.nss
     with rasterio.open(tmp_path / "nss_map.tif") as ds:
-        assert ds.descriptions == ("weh_wt_pct",)
-        a = ds.read(1)
-        for r in recs:  # every record's cell holds a value, in the site's CRS
-            row, col = ds.index(ox + r.pose_estimate[0], oy + r.pose_estimate[1])
-            assert np.isfinite(a[row, col])
+        assert ds.descriptions == ("weh_wt_pct", "weh_sigma_wt_pct", "records")
+        weh, sigma, count = ds.read()
+        cells = {}
+        for r in recs:  # each record in the cell of its footprint, 0.9 m ahead
+            yaw = r.pose_estimate[5]
+            row, col = ds.index(ox + r.pose_estimate[0] + cfg.x_m * math.cos(yaw),
+                                oy + r.pose_estimate[1] + cfg.x_m * math.sin(yaw))  # fmt: skip
+            cells.setdefault((row, col), []).append(r)
+        for (row, col), rs in cells.items():  # the cell's pooled counts, inverted
+            n = sum(r.values[0] for r in rs)
+            t = sum(r.integration_s for r in rs)
+            assert count[row, col] == len(rs)
+            assert weh[row, col] == pytest.approx((250.0 * t / n - 1.0) / 0.2, abs=1e-5)
+            assert sigma[row, col] == pytest.approx(250.0 * t / (0.2 * n**1.5), rel=1e-5)
     with open(tmp_path / "nss.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == outputs.NSS_COLUMNS and len(rows) == len(recs)
@@ -130,16 +144,19 @@ def test_drill_requests_beyond_a_metre_are_refused(tmp_path, capsys):
 
 def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
     from lunar_drake import metrics, outputs
-    from lunar_drake.science.drill import ice_at_depth
     from lunar_drake.science.nirvss import spot_means
     from lunar_drake.science.world import surface_map
     from lunar_drake.simulation import simulate
 
     scenario, site = small_site
+    # The hole lands in a cold pit (T_max 51 K, mean 34 K): an ice stability of 42 K and a
+    # 0.3 m skin depth put its dry layer between the samples (about 0.16 m), and 5 wt% of
+    # ice below it is 40 sigmas of NIRVSS's lamp noise, so every sample tells.
     s = apply_overrides(scenario, (
         "{simulation_duration: 15.0, sensors: {nirvss: {enabled: true}, drill: {enabled: true,"
         " seconds_per_step: 2.0}}, ground: {route: [{duration_s: 1.0}], actions: [{t_s: 2.5,"
-        " action: drill, depth_m: 0.5, step_m: 0.1}]}}"))  # fmt: skip
+        " action: drill, depth_m: 0.5, step_m: 0.1}]}, science: {ice: {stable_K: 42.0,"
+        " skin_depth_m: 0.3, background_wt_pct: 5.0}}}"))  # fmt: skip
     logs = simulate(scenario=s, site=site)
     recs = [r for _t, r in logs.science_received if r.instrument == "drill"]
     assert [round(r.values[1], 6) for r in recs] == [0.1, 0.2, 0.3, 0.4, 0.5]
@@ -151,8 +168,10 @@ def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
     spot = spot_means(surface_map(scenario=s, site=site), x + 0.6 * np.cos(yaw),
                       y + 0.6 * np.sin(yaw), radius_m=0.05)  # fmt: skip
     cfg = s.sensors.nirvss
-    for r in recs:
-        truth = ice_at_depth(spot["dry_layer_m"], spot["ice_wt_pct"], r.values[1])
+    dry, ice = spot["dry_layer_m"], spot["ice_wt_pct"]
+    assert 0.1 < dry < 0.5 and ice >= 5.0  # samples on both sides of the dry layer
+    for r in recs:  # none above the dry layer, the ice below it
+        truth = ice if r.values[1] >= dry else 0.0
         assert r.values[2] / cfg.ice_per_wt_pct == pytest.approx(
             truth, abs=4 * cfg.sigma_lamp / cfg.ice_per_wt_pct
         )
@@ -162,6 +181,11 @@ def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
     with open(tmp_path / "drill.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == outputs.DRILL_COLUMNS and [r["depth_m"] for r in rows][-1] == "0.5"
+    for row, r in zip(rows, recs, strict=True):  # the hole, 0.6 m ahead of the estimate
+        x_e, y_e, yaw_e = r.pose_estimate[0], r.pose_estimate[1], r.pose_estimate[5]
+        assert float(row["hole_x_est_m"]) == pytest.approx(x_e + 0.6 * math.cos(yaw_e), abs=1e-5)
+        assert float(row["hole_y_est_m"]) == pytest.approx(y_e + 0.6 * math.sin(yaw_e), abs=1e-5)
+        assert float(row["yaw_est_rad"]) == pytest.approx(yaw_e, abs=1e-6)
 
 
 def test_a_run_says_when_it_builds_its_world_model(tmp_path, monkeypatch, capsys):

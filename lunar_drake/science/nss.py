@@ -188,6 +188,18 @@ def weh_from_epithermal(counts, seconds, *, config: NSSConfig) -> np.ndarray:
         return (config.epithermal_dry_cps / rate - 1.0) / config.epithermal_per_wt_pct
 
 
+def weh_sigma_from_epithermal(counts, seconds, *, config: NSSConfig) -> np.ndarray:
+    """One standard deviation (wt%) of :func:`weh_from_epithermal` from the counts'
+    Poisson noise, to first order: ``C0 T / (k N^1.5)`` for ``N`` counts over ``T`` s
+    (infinite at 0 counts). Pooling records (their summed counts over their summed
+    seconds, the Poisson maximum-likelihood rate) shrinks it as ``1 / sqrt(records)``
+    and removes most of a single record's convexity bias (about ``C0 T / (k N^2)``)."""
+    n = np.asarray(counts, np.float64)
+    t = np.asarray(seconds, np.float64)
+    with np.errstate(divide="ignore"):
+        return config.epithermal_dry_cps * t / (config.epithermal_per_wt_pct * n**1.5)
+
+
 __all__ = [
     "WEH_PER_H_PPM",
     "HydrogenMap",
@@ -198,4 +210,5 @@ __all__ = [
     "ice_depth_weight",
     "weh_column",
     "weh_from_epithermal",
+    "weh_sigma_from_epithermal",
 ]

@@ -5,11 +5,14 @@
   (:func:`ground_xy`) -- with the ground's water-equivalent hydrogen from the epithermal
   counts (:func:`~lunar_drake.science.nss.weh_from_epithermal`);
 * :func:`grid_mean`: records averaged into square cells (a heat map);
+* :func:`pooled_weh`: the hydrogen of records pooled together (their summed counts over
+  their summed seconds), with its Poisson standard deviation;
 * :func:`nss_truth`: scoring only -- the footprint hydrogen of the world model at the
   rover's *true* position at each sample, and the correlation of the ground's gridded
   estimate with it;
 * :func:`science_maps`: the ground's maps of each instrument along the path (PNG over
-  the site hillshade, GeoTIFF in the site's CRS).
+  the site hillshade, GeoTIFF in the site's CRS, with each cell's record count and, for
+  NSS, its standard deviation).
 """
 
 from __future__ import annotations
@@ -19,7 +22,12 @@ import math
 
 import numpy as np
 
-from lunar_drake.science.nss import NSSConfig, footprint_weh, weh_from_epithermal
+from lunar_drake.science.nss import (
+    NSSConfig,
+    footprint_weh,
+    weh_from_epithermal,
+    weh_sigma_from_epithermal,
+)
 
 
 @dc.dataclass(frozen=True)
@@ -105,14 +113,26 @@ def grid_mean(x, y, values, *, cell_m: float, origin=(0.0, 0.0)) -> dict:
     return out
 
 
+def pooled_weh(epithermal, seconds, *, config: NSSConfig) -> tuple[float, float]:
+    """``(weh, sigma)`` (wt%) of records pooled: the inversion of their summed
+    epithermal counts over their summed integration times (the Poisson
+    maximum-likelihood rate, so the per-record inversion's convexity bias mostly goes)
+    and its Poisson standard deviation (:func:`~lunar_drake.science.nss.
+    weh_sigma_from_epithermal`)."""
+    n = float(np.sum(epithermal))
+    t = float(np.sum(seconds))
+    return (float(weh_from_epithermal(n, t, config=config)),
+            float(weh_sigma_from_epithermal(n, t, config=config)))  # fmt: skip
+
+
 def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSConfig,
               cell_m: float = 2.0, min_records: int = 3) -> dict:  # fmt: skip
     """Scoring: the world model's footprint WEH at the detector's true position at each
     sample (``truth_xy_yaw`` (n, 3) logged at ``truth_times``, interpolated), and the
     Pearson correlation between the ground's estimate and it over ``cell_m`` cells with
-    at least ``min_records`` records (each cell: the mean of its records, binned by the
-    ground's position). Returns ``{records, cells, r, truth_weh (array),
-    rmse_wt_pct}``."""
+    at least ``min_records`` records, binned where the ground puts the detector (each
+    cell: the ground's :func:`pooled_weh` of its records against the mean of their
+    truths). Returns ``{records, cells, r, truth_weh (array), rmse_wt_pct}``."""
     tt = np.asarray(truth_times, np.float64)
     p = np.asarray(truth_xy_yaw, np.float64)
     n = len(table)
@@ -124,10 +144,13 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
                       for a, b in zip(xd, yd, strict=True)])  # fmt: skip
     # Binned where the ground puts the detector: its own pose estimate, heading included.
     xe, ye = ahead(table.x_m, table.y_m, table.yaw_rad, config.x_m)
-    est = grid_mean(xe, ye, table.weh_est, cell_m=cell_m)
+    epi = grid_mean(xe, ye, table.epithermal, cell_m=cell_m)
+    sec = grid_mean(xe, ye, table.integration_s, cell_m=cell_m)
     tru = grid_mean(xe, ye, truth, cell_m=cell_m)
-    keys = sorted(k for k, (_m, c) in est.items() if c >= min_records)
-    a = np.array([est[k][0] for k in keys])
+    keys = sorted(k for k, (_m, c) in epi.items() if c >= min_records)
+    # Pooled: the mean counts over the mean seconds is the sum over the sum.
+    a = weh_from_epithermal(np.array([epi[k][0] for k in keys]),
+                            np.array([sec[k][0] for k in keys]), config=config)  # fmt: skip
     b = np.array([tru[k][0] for k in keys])
     r = float(np.corrcoef(a, b)[0, 1]) if len(keys) >= 3 and a.std() > 0 and b.std() > 0 else None
     rmse = float(np.sqrt(np.mean((a - b) ** 2))) if keys else None
@@ -136,11 +159,12 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
 
 @dc.dataclass(frozen=True)
 class Grid:
-    """Records averaged into square cells of a site-aligned grid: ``mean`` (bands, rows,
-    cols; NaN where empty), ``count`` (rows, cols), west edge ``x0_m``, north edge
-    ``y1_m`` (site m, multiples of ``cell_m``)."""
+    """Records averaged into square cells of a site-aligned grid: ``mean`` and ``total``
+    (bands, rows, cols; the mean NaN where empty, the sum 0), ``count`` (rows, cols),
+    west edge ``x0_m``, north edge ``y1_m`` (site m, multiples of ``cell_m``)."""
 
     mean: np.ndarray
+    total: np.ndarray
     count: np.ndarray
     x0_m: float
     y1_m: float
@@ -176,12 +200,13 @@ def grid_records(x, y, values, *, cell_m: float, margin_cells: int = 2) -> Grid 
         np.add.at(total[b], (r, c), v[:, b])
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
-    return Grid(mean, count, float(x0), float(y1), float(cell_m))
+    return Grid(mean, total, count, float(x0), float(y1), float(cell_m))
 
 
-#: Per instrument: (file stem, band names, value unit, the band shown in the PNG).
+#: Per instrument: (file stem, band names, value unit, the band shown in the PNG). Each
+#: GeoTIFF also ends with a ``records`` band (records per cell).
 MAPS = {
-    "nss": ("nss_map", ("weh_wt_pct",), "water-equivalent hydrogen (wt%)", 0),
+    "nss": ("nss_map", ("weh_wt_pct", "weh_sigma_wt_pct"), "hydrogen (wt% WEH)", 0),
     "nirvss": ("nirvss_map", None, "band depth (-)", 1),
     "lcs": ("lcs_map", ("temperature_K",), "surface temperature (K, LCS)", 0),
 }
@@ -192,8 +217,10 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
     received placed at the downlinked on-board estimate (VO corrected with the run's
     keyframes, :func:`ground_xy`): ``<stem>.png`` (over the site
     hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
-    one band per quantity, NaN where no record fell). NSS: water-equivalent hydrogen;
-    NIRVSS: every band (the PNG shows OH); LCS: temperature. Returns the paths."""
+    one band per quantity, NaN where no record fell, then ``records``, the records per
+    cell). NSS: water-equivalent hydrogen of each cell's pooled counts
+    (:func:`pooled_weh`) and its Poisson standard deviation; NIRVSS: every band (the PNG
+    shows OH); LCS: temperature. Returns the paths."""
     from pathlib import Path
 
     from lunar_drake.science.nirvss import BANDS
@@ -204,7 +231,7 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
     nss = nss_table(logs.science_received, config=scenario.sensors.nss, keyframes=keyframes)
     if len(nss):  # each record where the ground puts the instrument's footprint
         recs["nss"] = (*ahead(nss.x_m, nss.y_m, nss.yaw_rad, scenario.sensors.nss.x_m),
-                       nss.weh_est)  # fmt: skip
+                       np.stack([nss.epithermal, nss.integration_s], axis=1))  # fmt: skip
     nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
     if nir:
         nx, ny, nyaw = ground_pose([r.t_sample_s for r in nir],
@@ -219,6 +246,14 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
         grid = grid_records(x, y, v, cell_m=cell_m)
         if grid is None:
             continue
+        if name == "nss":  # each cell's pooled counts, inverted, and their sigma
+            cfg = scenario.sensors.nss
+            with np.errstate(invalid="ignore"):
+                w = weh_from_epithermal(grid.total[0], grid.total[1], config=cfg)
+                sd = weh_sigma_from_epithermal(grid.total[0], grid.total[1], config=cfg)
+            empty = grid.count == 0
+            grid = dc.replace(grid, mean=np.stack([np.where(empty, np.nan, w),
+                                                   np.where(empty, np.nan, sd)]))  # fmt: skip
         stem, bands, unit, shown = MAPS[name]
         bands = tuple(f"bd_{b}" for b in BANDS) if bands is None else bands
         _map_png(out / f"{stem}.png", grid, band=shown, x=x, y=y, site=site,
@@ -226,7 +261,7 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
                        f"({bands[shown]})", unit=unit)  # fmt: skip
         paths.append(out / f"{stem}.png")
         if site is not None:
-            _map_tif(out / f"{stem}.tif", grid, bands=bands, hf=site.heightfield)
+            _map_tif(out / f"{stem}.tif", grid, bands=(*bands, "records"), hf=site.heightfield)
             paths.append(out / f"{stem}.tif")
     return paths
 
@@ -238,8 +273,9 @@ def _map_tif(path, grid: Grid, *, bands, hf) -> None:
 
     ox, oy = hf.origin_xy
     transform = Affine(grid.cell_m, 0.0, ox + grid.x0_m, 0.0, -grid.cell_m, oy + grid.y1_m)
-    write_named_bands(path, grid.mean.astype(np.float32), names=bands, transform=transform,
-                      crs=hf.crs, nodata=float("nan"))  # fmt: skip
+    data = np.concatenate([grid.mean, grid.count[None].astype(np.float64)]).astype(np.float32)
+    write_named_bands(path, data, names=bands, transform=transform, crs=hf.crs,
+                      nodata=float("nan"))  # fmt: skip
 
 
 def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) -> None:
@@ -291,5 +327,6 @@ __all__ = [
     "ground_xy",
     "nss_table",
     "nss_truth",
+    "pooled_weh",
     "science_maps",
 ]
