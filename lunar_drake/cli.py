@@ -674,7 +674,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "scenario's)")  # fmt: skip
     wb.add_argument("--config", default=None,
                     help="a WorldConfig YAML file (shaped as world.json's 'config')")  # fmt: skip
-    wb.add_argument("--seed", type=int, default=None, help="noise seed (default: the site's)")
+    wb.add_argument("--seed", type=int, default=None,
+                    help="noise seed (default: the site.json's; 0 without one)")
     wb.add_argument("--workers", type=_positive_int, default=None,
                     help="threads (default: the config's, 2)")  # fmt: skip
     wb.add_argument("--no-progress", action="store_true")

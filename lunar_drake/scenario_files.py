@@ -12,9 +12,10 @@ Before Drake's ``yaml_load_typed`` sees a document it is parsed with PyYAML's sa
 loader (YAML never executes code) and walked against the schema, so a malformed file, a
 Python tag or an unknown key (at any depth) is a one-line
 :class:`~lunar_drake.errors.ConfigError` naming the file, the line and the full key
-(``rover.description.wheel_radius``). Relative paths in ``terrain.dem`` and
-``lighting.extra_kernels`` are resolved against the scenario file's directory, so the
-written ``scenario.yaml`` holds absolute paths.
+(``rover.description.wheel_radius``). A value out of range after the merge is named
+with the file (or ``--scenario-text``) and line that wrote it last. Relative paths in
+``terrain.dem`` and ``lighting.extra_kernels`` are resolved against the scenario file's
+directory, so the written ``scenario.yaml`` holds absolute paths.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from pathlib import Path
 import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from lunar_drake.errors import ConfigError
+from lunar_drake.errors import ConfigError, LunarDrakeError
 from lunar_drake.scenario import Scenario, validate_scenario
 
 _STANDARD_TAGS = {
@@ -229,6 +230,7 @@ def load_scenario(
     root = _compose(text, source)
     if root is not None:
         _check_tags(root, source)
+    origin = (source, root)
     if root is not None and _is_bare(root):
         _check_keys(root, Scenario, "", source)
         result = _drake_load(schema_defaults=Scenario(), where=source, data=text)
@@ -239,6 +241,7 @@ def load_scenario(
                 f"scenario {scenario_name!r} not found in {source!r}; choose one of {names}"
             )
         node = next(v for k, v in root.value if k.value == scenario_name)
+        origin = (source, node)
         _check_keys(node, Scenario, "", f"{source} (scenario {scenario_name!r})")
         result = _drake_load(
             schema_defaults=Scenario(),
@@ -249,20 +252,60 @@ def load_scenario(
         if not result.name:
             result.name = scenario_name
     _resolve_paths(result, path.parent)
-    result = apply_overrides(result, scenario_text, source="--scenario-text")
+    result = apply_overrides(result, scenario_text, source="--scenario-text", origins=[origin])
     return result
 
 
-def apply_overrides(scenario: Scenario, text: str, *, source: str = "overrides") -> Scenario:
+#: The scenario key an error message starts with (``sensors.nss.height_m = ...``).
+_MESSAGE_KEY = re.compile(r"([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*)[ :]")
+
+
+def _key_line(node, key: str) -> int | None:
+    """The 1-based line of dotted ``key`` (``a.b[2].c``) in YAML mapping ``node``; None
+    where it is not written there."""
+    for part in key.split("."):
+        m = re.fullmatch(r"(\w+)(?:\[(\d+)\])?", part)
+        if not isinstance(node, yaml.MappingNode):
+            return None
+        found = next(((k, v) for k, v in node.value if k.value == m[1]), None)
+        if found is None:
+            return None
+        mark_node, node = found
+        if m[2] is not None:
+            if not isinstance(node, yaml.SequenceNode) or int(m[2]) >= len(node.value):
+                return mark_node.start_mark.line + 1
+            node = mark_node = node.value[int(m[2])]
+    return mark_node.start_mark.line + 1
+
+
+def _validate_located(scenario: Scenario, origins) -> None:
+    """:func:`validate_scenario`; an error naming a key written in one of ``origins``
+    (``(source, node)``, the last applied first) gets that source and line in front."""
+    try:
+        validate_scenario(scenario)
+    except LunarDrakeError as exc:
+        msg = str(exc)
+        m = _MESSAGE_KEY.match(msg)
+        for source, node in origins if m else ():
+            line = _key_line(node, m[1]) if node is not None else None
+            if line is not None:
+                raise type(exc)(f"{source}, line {line}: {msg}") from None
+        raise
+
+
+def apply_overrides(scenario: Scenario, text: str, *, source: str = "overrides",
+                    origins=()) -> Scenario:  # fmt: skip
     """``scenario`` with the YAML mapping ``text`` merged on top, validated. Relative
-    paths in the overrides are resolved against the working directory."""
+    paths in the overrides are resolved against the working directory. A value out of
+    range is named with the source and line that wrote it: ``text``'s, else that of
+    ``origins`` (``(source, YAML node)`` pairs, the last applied first)."""
     node = _compose(text or "{}", source)
     if node is not None:
         _check_tags(node, source)
         _check_keys(node, Scenario, "", source)
         scenario = _drake_load(schema_defaults=scenario, where=source, data=text)
         _resolve_paths(scenario, Path.cwd())
-    validate_scenario(scenario)
+    _validate_located(scenario, [(source, node), *origins])
     return scenario
 
 

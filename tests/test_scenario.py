@@ -172,6 +172,26 @@ def test_unknown_key_in_a_file_names_the_file_and_line(tmp_path):
         load_scenario(filename=f, scenario_name="mission")
 
 
+def test_a_value_out_of_range_names_the_file_and_line_that_wrote_it(tmp_path):
+    f = tmp_path / "mine.yaml"
+    f.write_text("mission:\n  simulation_duration: 10.0\n  sensors:\n    nss:\n"
+                 "      height_m: 0.0\n  ground:\n    route:\n      - {duration_s: 1.0}\n"
+                 "      - {duration_s: -1.0}\n")  # fmt: skip
+    where = r"^\S*mine\.yaml, line 5: sensors\.nss\.height_m = 0 "
+    with pytest.raises(OutOfRangeError, match=where):
+        load_scenario(filename=f, scenario_name="mission")
+    f.write_text(f.read_text().replace("height_m: 0.0", "height_m: 0.5"))
+    with pytest.raises(OutOfRangeError, match=r"mine\.yaml, line 9: ground\.route\[1\]\.dur"):
+        load_scenario(filename=f, scenario_name="mission")
+    # The overrides wrote it last: theirs is the line named.
+    with pytest.raises(OutOfRangeError, match=r"--scenario-text, line 2: sensors\.nss\.height_m"):
+        load_scenario(filename=f, scenario_name="mission",
+                      scenario_text="{simulation_duration: 5.0,\n sensors: {nss: {height_m: -1}}}")
+    # A default out of range written nowhere: the key alone (as before).
+    with pytest.raises(OutOfRangeError, match=r"^simulation_duration = -1 "):
+        apply_overrides(Scenario(simulation_duration=-1.0), "{}")
+
+
 def test_malformed_yaml_names_the_file_and_line(tmp_path):
     f = tmp_path / "bad.yaml"
     f.write_text("default:\n  random_seed: [1\n")

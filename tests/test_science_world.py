@@ -479,6 +479,14 @@ def test_world_build_bad_sites_and_outputs(small_site, tmp_path, capsys):
         z[3, 4] = np.nan
         ds.write(z, 1)
     cases.append((holes, "1 nodata cells"))
+    bad_json = tmp_path / "bad_json"
+    shutil.copytree(src, bad_json)
+    (bad_json / "site.json").write_text('{"config": {"seed": "seven"}}')
+    cases.append((bad_json, "is not a site's site.json: config.seed = 'seven'"))
+    torn = tmp_path / "torn"
+    shutil.copytree(src, torn)
+    (torn / "site.json").write_text('{"config": {"se')
+    cases.append((torn, "is not a site's site.json: Unterminated string"))
     for site_dir, msg in cases:
         out = tmp_path / f"w_{site_dir.name}"
         assert main(["world", "build", str(site_dir), "--out", str(out), "--no-progress"]) == 2

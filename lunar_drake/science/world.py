@@ -596,11 +596,19 @@ def compute_world(z: np.ndarray, **kwargs) -> dict:
 
 
 def _site_seed(site_dir: Path) -> int:
-    try:
-        meta = json.loads((site_dir / "site.json").read_text())
-        return int(meta.get("config", {}).get("seed", 0))
-    except (OSError, ValueError):
+    """The seed of the site's ``site.json`` (``config.seed``); 0 for a site without one
+    (an imported DEM). A ``site.json`` that cannot be read as such is an error."""
+    path = site_dir / "site.json"
+    if not path.exists():
         return 0
+    try:
+        seed = json.loads(path.read_text()).get("config", {}).get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"config.seed = {seed!r} is not a non-negative integer")
+    except (OSError, ValueError, AttributeError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise WorldModelError(f"{str(path)!r} is not a site's site.json: {msg}") from None
+    return seed
 
 
 def build_world(
