@@ -7,9 +7,10 @@ neutron spectrometer matches the world model.
 Runs the ``prospect`` scenario (the default site, a lawn-mower of six 50 m lanes 10 m
 apart over about 2500 m^2, NSS records down the link's science channel; cameras off)
 and writes its run directory under ``--runs``. ``nss_truth_r`` is the correlation, over
-2 m cells along the path, between the ground's water-equivalent hydrogen (from the
-epithermal counts, placed at the downlinked on-board estimate) and the world model's
-footprint hydrogen at the detector's true positions
+2 m cells along the path, between the ground's water-equivalent hydrogen (each cell's
+epithermal counts pooled and inverted, placed at the downlinked on-board estimate) and
+the world model's footprint hydrogen at the detector's true positions; ``rmse_wt_pct``
+and ``bias_wt_pct`` (mean estimate less truth) over the same cells
 (:func:`lunar_drake.science.products.nss_truth`); ``area_m2`` the lawn-mower's
 bounding box. Goal (issue 15): r >= 0.9 over the 2500 m^2 area with default noise.
 Prints a table; writes JSON with --out.
@@ -63,6 +64,7 @@ def main(argv=None) -> int:
         "records": sci["nss_records"],
         "cells": sci.get("nss_cells"),
         "rmse_wt_pct": sci.get("nss_rmse_wt_pct"),
+        "bias_wt_pct": sci.get("nss_bias_wt_pct"),
         "weh_est_mean_wt_pct": sci.get("weh_est_mean_wt_pct"),
         "weh_truth_mean_wt_pct": sci.get("weh_truth_mean_wt_pct"),
         "goals_reached": sum(1 for g in summary["goals"] if g["reached"]),
@@ -73,13 +75,14 @@ def main(argv=None) -> int:
         "run_dir": str(Path(args.runs).resolve()),
     }
     print(
-        f"{'r':>6} {'area m2':>8} {'records':>8} {'cells':>6} {'rmse wt%':>9} {'goals':>6} "
-        f"{'driven m':>9}"
+        f"{'r':>6} {'area m2':>8} {'records':>8} {'cells':>6} {'rmse wt%':>9} {'bias wt%':>9} "
+        f"{'goals':>6} {'driven m':>9}"
     )
     r = doc["nss_truth_r"] if doc["nss_truth_r"] is not None else float("nan")
     print(
         f"{r:>6.3f} {doc['area_m2']:>8.0f} {doc['records']:>8} "
         f"{doc['cells'] or 0:>6} {doc['rmse_wt_pct'] or float('nan'):>9.3f} "
+        f"{doc['bias_wt_pct'] if doc['bias_wt_pct'] is not None else float('nan'):>+9.3f} "
         f"{doc['goals_reached']:>3}/{doc['goals']:<2} {doc['distance_m']:>9.1f}"
     )
     if args.out:

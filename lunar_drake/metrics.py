@@ -330,7 +330,7 @@ def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     """NSS scoring on truth: records received, the ground's mean hydrogen estimate and
     its correlation with the world model's footprint hydrogen at the true positions over
     2 m cells (:func:`lunar_drake.science.products.nss_truth`)."""
-    from lunar_drake.science.products import nss_table, nss_truth, pooled_weh
+    from lunar_drake.science.products import nss_table, nss_truth
     from lunar_drake.science.world import hydrogen_map
 
     out = {}
@@ -349,12 +349,12 @@ def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     pose = logs.vectors["truth.pose"]
     t = nss_truth(table, truth_times=pose.times, truth_xy_yaw=pose.data[:, [0, 1, 5]],
                   hmap=hydrogen_map(scenario=scenario, site=site), config=cfg)  # fmt: skip
-    pooled = pooled_weh(table.epithermal, table.integration_s, config=cfg)[0]
     out.update({
-        "weh_est_mean_wt_pct": _r(pooled),
+        "weh_est_mean_wt_pct": _r(float(np.mean(table.weh_est))),
         "weh_truth_mean_wt_pct": _r(float(np.mean(t["truth_weh"]))),
         "nss_truth_r": None if t["r"] is None else _r(t["r"]),
         "nss_cells": t["cells"],
         "nss_rmse_wt_pct": None if t["rmse_wt_pct"] is None else _r(t["rmse_wt_pct"]),
+        "nss_bias_wt_pct": None if t["bias_wt_pct"] is None else _r(t["bias_wt_pct"]),
     })  # fmt: skip
     return out

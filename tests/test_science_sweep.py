@@ -122,5 +122,30 @@ def test_the_canonical_dem_is_the_turned_grid(azimuth):
     z = np.random.default_rng(4).normal(size=(70, 131)).astype(np.float32)
     o = sweep_orientation(azimuth, z.shape)
     zc = canonical_dem(z, o)
-    assert zc.dtype == np.float64 and zc.flags.c_contiguous
-    assert np.array_equal(zc, o.canon(z).astype(np.float64))
+    assert zc.dtype == np.float32 and zc.flags.c_contiguous  # float32 stays float32
+    assert np.array_equal(zc, o.canon(z))
+    z64 = canonical_dem(z.astype(np.float64) / 3.0, o)
+    assert z64.dtype == np.float64 and np.array_equal(z64, o.canon(z.astype(np.float64) / 3.0))
+
+
+@pytest.mark.parametrize("azimuth", [33.0, 200.0])
+def test_float32_heights_give_the_bytes_of_their_float64_copy(azimuth):
+    # The kernels widen each float32 height as they load it: the sunlight of every mode
+    # is bit-identical to that of the same heights held as float64.
+    from lunar_drake.science.sweep import EPOCH, SECTOR, TANGENT, Sweep
+
+    z32 = _terrain(72, seed=5).astype(np.float32) * np.float32(0.37)  # odd float32 values
+    out = {}
+    for z in (z32, z32.astype(np.float64)):
+        sw = Sweep(z, azimuth_deg=azimuth, resolution_m=RES, chunk=16, near=3)
+        assert sw.zc.dtype == z.dtype
+        par = sw.sun_par(flux_w_m2=1000.0, mask_deg=0.0, radius_deg=0.27, w_mean=0.25)
+        res = []
+        for mode, els in ((SECTOR, [3.0, 1.0, 2.0, 2.5, 2.9]), (EPOCH, [2.0]), (TANGENT, [0.0])):
+            a = np.zeros(sw.orient.shape, np.float32)
+            b, lit = np.zeros_like(a), np.zeros(a.shape, np.uint8)
+            sw.run(mode, par, els, a, b, lit)
+            res.append((a.tobytes(), b.tobytes(), lit.tobytes()))
+            assert (mode == TANGENT or (lit.any() and not lit.all())), mode
+        out[z.dtype] = res
+    assert out[np.dtype(np.float32)] == out[np.dtype(np.float64)]

@@ -132,7 +132,8 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     Pearson correlation between the ground's estimate and it over ``cell_m`` cells with
     at least ``min_records`` records, binned where the ground puts the detector (each
     cell: the ground's :func:`pooled_weh` of its records against the mean of their
-    truths). Returns ``{records, cells, r, truth_weh (array), rmse_wt_pct}``."""
+    truths). Returns ``{records, cells, r, truth_weh (array), rmse_wt_pct, bias_wt_pct}``
+    (the last two over those cells, the bias their mean estimate less truth)."""
     tt = np.asarray(truth_times, np.float64)
     p = np.asarray(truth_xy_yaw, np.float64)
     n = len(table)
@@ -154,7 +155,9 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     b = np.array([tru[k][0] for k in keys])
     r = float(np.corrcoef(a, b)[0, 1]) if len(keys) >= 3 and a.std() > 0 and b.std() > 0 else None
     rmse = float(np.sqrt(np.mean((a - b) ** 2))) if keys else None
-    return {"records": n, "cells": len(keys), "r": r, "truth_weh": truth, "rmse_wt_pct": rmse}
+    bias = float(np.mean(a - b)) if keys else None
+    return {"records": n, "cells": len(keys), "r": r, "truth_weh": truth, "rmse_wt_pct": rmse,
+            "bias_wt_pct": bias}
 
 
 @dc.dataclass(frozen=True)

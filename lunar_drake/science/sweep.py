@@ -133,7 +133,7 @@ def _near(zc, r, c, sigma, step_m, p_i, p_f, reach):  # pragma: no cover - numba
     (:func:`near_plan`; ``reach`` its largest row/column offset); NO_CASTER when the
     ray leaves the grid at once."""
     nr, _nc = zc.shape
-    z0 = zc[r, c]
+    z0 = np.float64(zc[r, c])
     if c == 0:
         return NO_CASTER
     best = NO_CASTER
@@ -142,9 +142,9 @@ def _near(zc, r, c, sigma, step_m, p_i, p_f, reach):  # pragma: no cover - numba
     # Leaving the centre: the bilinear cell's derivative along the ray (per column step).
     rn = r + g
     if 0 <= rn < nr or a_s == 0.0:
-        dz = zc[r, c - 1] - z0
+        dz = np.float64(zc[r, c - 1]) - z0
         if a_s > 0.0:
-            dz += a_s * (zc[rn, c] - z0)
+            dz += a_s * (np.float64(zc[rn, c]) - z0)
         best = dz / step_m
     inside = c >= reach and r >= reach and r + reach < nr
     for i in range(p_i.shape[0]):
@@ -154,13 +154,13 @@ def _near(zc, r, c, sigma, step_m, p_i, p_f, reach):  # pragma: no cover - numba
         if p_f[i, 1] == 0.0:  # a column crossing: between rows rr and rr + 1
             if not inside and (cc < 0 or rr < 0 or rr > nr - 1 or (f > 0.0 and rr + 1 > nr - 1)):
                 break
-            z1 = zc[rr, cc]
-            zs = z1 if f == 0.0 else z1 + f * (zc[rr + 1, cc] - z1)
+            z1 = np.float64(zc[rr, cc])
+            zs = z1 if f == 0.0 else z1 + f * (np.float64(zc[rr + 1, cc]) - z1)
         else:  # a row crossing: between columns cc and cc + 1
             if not inside and (cc < 0 or rr < 0 or rr > nr - 1):
                 break
-            z1 = zc[rr, cc]
-            zs = z1 + f * (zc[rr, cc + 1] - z1)
+            z1 = np.float64(zc[rr, cc])
+            zs = z1 + f * (np.float64(zc[rr, cc + 1]) - z1)
         t = (zs - z0) * p_f[i, 2] - p_f[i, 3]
         if t > best:
             best = t
@@ -211,21 +211,21 @@ def _slope(zc, r, c, inv_res):  # pragma: no cover - numba
     ``inv_res`` = 1 / pixel (1/m)."""
     nr, nc = zc.shape
     if 0 < r < nr - 1:
-        g_r = (zc[r + 1, c] - zc[r - 1, c]) * (0.5 * inv_res)
+        g_r = (np.float64(zc[r + 1, c]) - np.float64(zc[r - 1, c])) * (0.5 * inv_res)
     elif nr == 1:
         g_r = 0.0
     elif r == 0:
-        g_r = (zc[1, c] - zc[0, c]) * inv_res
+        g_r = (np.float64(zc[1, c]) - np.float64(zc[0, c])) * inv_res
     else:
-        g_r = (zc[r, c] - zc[r - 1, c]) * inv_res
+        g_r = (np.float64(zc[r, c]) - np.float64(zc[r - 1, c])) * inv_res
     if 0 < c < nc - 1:
-        g_c = (zc[r, c + 1] - zc[r, c - 1]) * (0.5 * inv_res)
+        g_c = (np.float64(zc[r, c + 1]) - np.float64(zc[r, c - 1])) * (0.5 * inv_res)
     elif nc == 1:
         g_c = 0.0
     elif c == 0:
-        g_c = (zc[r, 1] - zc[r, 0]) * inv_res
+        g_c = (np.float64(zc[r, 1]) - np.float64(zc[r, 0])) * inv_res
     else:
-        g_c = (zc[r, c] - zc[r, c - 1]) * inv_res
+        g_c = (np.float64(zc[r, c]) - np.float64(zc[r, c - 1])) * inv_res
     return g_r, g_c
 
 
@@ -410,11 +410,14 @@ def _turn(z, transpose, flip, out):  # pragma: no cover - numba
 
 
 def canonical_dem(z: np.ndarray, orient) -> np.ndarray:
-    """``orient.canon(z)`` as a C-contiguous float64 copy (a blocked, threaded turn)."""
+    """``orient.canon(z)`` as a C-contiguous copy (a blocked, threaded turn): float32
+    heights stay float32 (half the memory and traffic; the kernels widen every height
+    to float64 as they load it, so the results are those of a float64 copy), others
+    become float64."""
     z = np.asarray(z)
     if z.dtype not in (np.float32, np.float64):
         z = z.astype(np.float64)
-    out = np.empty(orient.shape, np.float64)
+    out = np.empty(orient.shape, z.dtype)
     _turn(z, bool(orient.transpose), bool(orient.flip), out)
     return out
 
