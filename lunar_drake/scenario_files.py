@@ -260,7 +260,7 @@ def load_scenario(
 _MESSAGE_KEY = re.compile(r"([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*)[ :]")
 
 
-def _key_line(node, key: str) -> int | None:
+def _key_line(node: yaml.Node, key: str) -> int | None:
     """The 1-based line of dotted ``key`` (``a.b[2].c``) in YAML mapping ``node``; None
     where it is not written there."""
     for part in key.split("."):
@@ -278,7 +278,7 @@ def _key_line(node, key: str) -> int | None:
     return mark_node.start_mark.line + 1
 
 
-def _validate_located(scenario: Scenario, origins) -> None:
+def _validate_located(scenario: Scenario, origins: list) -> None:
     """:func:`validate_scenario`; an error naming a key written in one of ``origins``
     (``(source, node)``, the last applied first) gets that source and line in front."""
     try:
@@ -294,7 +294,7 @@ def _validate_located(scenario: Scenario, origins) -> None:
 
 
 def apply_overrides(scenario: Scenario, text: str, *, source: str = "overrides",
-                    origins=()) -> Scenario:  # fmt: skip
+                    origins: tuple | list = ()) -> Scenario:  # fmt: skip
     """``scenario`` with the YAML mapping ``text`` merged on top, validated. Relative
     paths in the overrides are resolved against the working directory. A value out of
     range is named with the source and line that wrote it: ``text``'s, else that of

@@ -76,6 +76,8 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
     summary = metrics.summarize(scenario=s, site=site, logs=logs)
     assert summary["science"]["nss_records"] == len(recs)
     assert summary["science"]["nirvss_records"] == len(nir)
+    sci = summary["science"]
+    assert (sci["nss_bias_wt_pct"] is None) == (sci["nss_cells"] == 0)  # scored cells only
     assert 0.3 < summary["science"]["lcs_rmse_K"] < 3.0  # the 1 K noise, a few samples
     outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall, site=site)
     import rasterio

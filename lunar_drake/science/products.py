@@ -118,11 +118,20 @@ def pooled_weh(epithermal, seconds, *, config: NSSConfig) -> tuple[float, float]
     epithermal counts over their summed integration times (the Poisson
     maximum-likelihood rate, so the per-record inversion's convexity bias mostly goes)
     and its Poisson standard deviation (:func:`~lunar_drake.science.nss.
-    weh_sigma_from_epithermal`)."""
-    n = float(np.sum(epithermal))
-    t = float(np.sum(seconds))
-    return (float(weh_from_epithermal(n, t, config=config)),
-            float(weh_sigma_from_epithermal(n, t, config=config)))  # fmt: skip
+    weh_sigma_from_epithermal`); see :func:`summed_weh`."""
+    w, sd = summed_weh(np.sum(epithermal), np.sum(seconds), config=config)
+    return float(w), float(sd)
+
+
+def summed_weh(counts, seconds, *, config: NSSConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``(weh, sigma)`` (wt%) of summed epithermal ``counts`` over summed ``seconds``
+    (arrays, e.g. one entry per cell): the inversion and its Poisson standard deviation;
+    NaN and infinite where no count fell (no rate to invert)."""
+    n = np.asarray(counts, np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(n > 0, weh_from_epithermal(n, seconds, config=config), np.nan)
+        sd = weh_sigma_from_epithermal(n, seconds, config=config)
+    return w, sd
 
 
 def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSConfig,
@@ -148,10 +157,10 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     epi = grid_mean(xe, ye, table.epithermal, cell_m=cell_m)
     sec = grid_mean(xe, ye, table.integration_s, cell_m=cell_m)
     tru = grid_mean(xe, ye, truth, cell_m=cell_m)
-    keys = sorted(k for k, (_m, c) in epi.items() if c >= min_records)
-    # Pooled: the mean counts over the mean seconds is the sum over the sum.
-    a = weh_from_epithermal(np.array([epi[k][0] for k in keys]),
-                            np.array([sec[k][0] for k in keys]), config=config)  # fmt: skip
+    # Pooled: the sum of a cell's counts over the sum of its seconds.
+    keys = sorted(k for k, (m, c) in epi.items() if c >= min_records and m > 0)
+    a, _ = summed_weh([epi[k][0] * epi[k][1] for k in keys],
+                      [sec[k][0] * sec[k][1] for k in keys], config=config)  # fmt: skip
     b = np.array([tru[k][0] for k in keys])
     r = float(np.corrcoef(a, b)[0, 1]) if len(keys) >= 3 and a.std() > 0 and b.std() > 0 else None
     rmse = float(np.sqrt(np.mean((a - b) ** 2))) if keys else None
@@ -162,7 +171,7 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
 
 @dc.dataclass(frozen=True)
 class Grid:
-    """Records averaged into square cells of a site-aligned grid: ``mean`` and ``total``
+    """Records gathered into square cells of a site-aligned grid: ``mean`` and ``total``
     (bands, rows, cols; the mean NaN where empty, the sum 0), ``count`` (rows, cols),
     west edge ``x0_m``, north edge ``y1_m`` (site m, multiples of ``cell_m``)."""
 
@@ -250,13 +259,9 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
         if grid is None:
             continue
         if name == "nss":  # each cell's pooled counts, inverted, and their sigma
-            cfg = scenario.sensors.nss
-            with np.errstate(invalid="ignore"):
-                w = weh_from_epithermal(grid.total[0], grid.total[1], config=cfg)
-                sd = weh_sigma_from_epithermal(grid.total[0], grid.total[1], config=cfg)
+            w, sd = summed_weh(grid.total[0], grid.total[1], config=scenario.sensors.nss)
             empty = grid.count == 0
-            grid = dc.replace(grid, mean=np.stack([np.where(empty, np.nan, w),
-                                                   np.where(empty, np.nan, sd)]))  # fmt: skip
+            grid = dc.replace(grid, mean=np.stack([w, np.where(empty, np.nan, sd)]))
         stem, bands, unit, shown = MAPS[name]
         bands = tuple(f"bd_{b}" for b in BANDS) if bands is None else bands
         _map_png(out / f"{stem}.png", grid, band=shown, x=x, y=y, site=site,
@@ -332,4 +337,5 @@ __all__ = [
     "nss_truth",
     "pooled_weh",
     "science_maps",
+    "summed_weh",
 ]

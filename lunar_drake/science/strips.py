@@ -19,7 +19,7 @@
   beyond ``near_field_m`` is averaged into its cell), seen from the cell's centre
   rather than the pixel's.
 
-Memory: the window's DEM (float32 read, float64 canonical copy: 12 bytes a window
+Memory: the window's DEM (float32 read and a float32 canonical copy: 8 bytes a window
 pixel), the strip's accumulators (17 bytes a strip pixel; the window's arrays are
 allocated whole but their halo rows are never touched), plus the far fields (8 bytes a
 coarse cell a sweep; :func:`far_factor` keeps that under 32 MB a sweep). The sweep
