@@ -480,12 +480,19 @@ def validate_scenario(s: Scenario) -> None:
     check_range("site.latitude_deg", s.site.latitude_deg, -90.0, 90.0, unit=" deg")
     check_range("site.longitude_deg", s.site.longitude_deg, -360.0, 360.0, unit=" deg")
     try:
-        datetime.datetime.fromisoformat(s.site.epoch_utc)
+        epoch = datetime.datetime.fromisoformat(s.site.epoch_utc)
     except ValueError:
         raise ConfigError(
             f"site.epoch_utc = {s.site.epoch_utc!r} is not an ISO 8601 UTC time "
             "(e.g. 2027-11-15T00:00:00)"
         ) from None
+    offset_min = round(epoch.utcoffset().total_seconds() / 60) if epoch.utcoffset() else 0
+    if offset_min:
+        h, m = divmod(abs(offset_min), 60)
+        raise ConfigError(
+            f"site.epoch_utc = {s.site.epoch_utc!r} is {'+-'[offset_min < 0]}{h:02d}:{m:02d} "
+            "off UTC; give the time in UTC (e.g. 2027-11-15T00:00:00 or ...Z)"
+        )
     _validate_terrain(s.terrain)
     check_range("terrain_view.max_mesh_px", s.terrain_view.max_mesh_px, 8, 4096)
     check_range("terrain_view.albedo_gain", s.terrain_view.albedo_gain, 0.0, 100.0, lo_open=True)

@@ -227,6 +227,8 @@ def test_missing_file_and_name():
         ("{terrain: {resolution_m: -0.1}}", "terrain.resolution_m = -0.1 is out of range"),
         ("{simulation_duration: -2}", "simulation_duration = -2"),
         ("{site: {latitude_deg: -95}}", "site.latitude_deg = -95"),
+        ("{site: {epoch_utc: '2027-11-15T00:00:00+05:00'}}", r"is \+05:00 off UTC"),
+        ("{site: {epoch_utc: '2027-11-15T00:00:00-03:30'}}", "is -03:30 off UTC"),
         ("{terrain: {min_crater_m: 2.0, max_crater_m: 1.0}}", "terrain.max_crater_m = 1 must"),
         ("{sensors: {imu: {rate_hz: 0}}}", "sensors.imu.rate_hz = 0 is out of range"),
         ("{sensors: {camera: {engine: gpu}}}", "sensors.camera.engine = 'gpu' is unknown"),
