@@ -258,38 +258,46 @@ def load_scenario(
 
 #: The scenario key an error message starts with (``sensors.nss.height_m = ...``).
 _MESSAGE_KEY = re.compile(r"([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*)[ :]")
+#: Any further dotted scenario key a message names (``... sensors.nirvss.enabled``).
+_DOTTED_KEY = re.compile(r"(?<![\w.\[\]])([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)+)")
 
 
 def _key_line(node: yaml.Node, key: str) -> int | None:
-    """The 1-based line of dotted ``key`` (``a.b[2].c``) in YAML mapping ``node``; None
-    where it is not written there."""
+    """The 1-based line of dotted ``key`` (``a.b[2].c``) in YAML mapping ``node``: that
+    of the list element holding it where the element is written but the key is left to
+    its default; None where it is not written there."""
+    element = None
     for part in key.split("."):
         m = re.fullmatch(r"(\w+)(?:\[(\d+)\])?", part)
         if not isinstance(node, yaml.MappingNode):
-            return None
+            return element
         found = next(((k, v) for k, v in node.value if k.value == m[1]), None)
         if found is None:
-            return None
+            return element
         mark_node, node = found
         if m[2] is not None:
             if not isinstance(node, yaml.SequenceNode) or int(m[2]) >= len(node.value):
                 return mark_node.start_mark.line + 1
             node = mark_node = node.value[int(m[2])]
+            element = mark_node.start_mark.line + 1
     return mark_node.start_mark.line + 1
 
 
 def _validate_located(scenario: Scenario, origins: list) -> None:
     """:func:`validate_scenario`; an error naming a key written in one of ``origins``
-    (``(source, node)``, the last applied first) gets that source and line in front."""
+    (``(source, node)``, the last applied first) gets that source and line in front: the
+    key the message starts with, else any other it names in full (``a.b``)."""
     try:
         validate_scenario(scenario)
     except LunarDrakeError as exc:
         msg = str(exc)
         m = _MESSAGE_KEY.match(msg)
-        for source, node in origins if m else ():
-            line = _key_line(node, m[1]) if node is not None else None
-            if line is not None:
-                raise type(exc)(f"{source}, line {line}: {msg}") from None
+        keys = ([m[1]] if m else []) + [k for k in _DOTTED_KEY.findall(msg) if not m or k != m[1]]
+        for source, node in origins:
+            for key in keys if node is not None else ():
+                line = _key_line(node, key)
+                if line is not None:
+                    raise type(exc)(f"{source}, line {line}: {msg}") from None
         raise
 
 

@@ -183,7 +183,19 @@ def test_a_value_out_of_range_names_the_file_and_line_that_wrote_it(tmp_path):
     f.write_text(f.read_text().replace("height_m: 0.0", "height_m: 0.5"))
     with pytest.raises(OutOfRangeError, match=r"mine\.yaml, line 9: ground\.route\[1\]\.dur"):
         load_scenario(filename=f, scenario_name="mission")
-    # The overrides wrote it last: theirs is the line named.
+    # A key the message names second, written by the overrides (the first is a default).
+    with pytest.raises(OutOfRangeError, match=r"^--scenario-text, line 2: ground\.heartbeat_s"):
+        load_scenario(filename=f, scenario_name="mission",
+                      scenario_text="{ground: {route: [{duration_s: 1.0}]},\n flight: "
+                                    "{safety: {uplink_timeout_s: 4.0}}}")  # fmt: skip
+    # A default inside a written list element: the element's line.
+    g = tmp_path / "drill.yaml"
+    g.write_text("sensors: {nirvss: {enabled: true}, drill: {enabled: true}}\nground:\n"
+                 "  actions:\n    - {t_s: 1.0, action: drill, depth_m: 0.5}\n"
+                 "    - {t_s: 9.0, action: drill, depth_m: 0.05}\n")  # fmt: skip
+    with pytest.raises(OutOfRangeError, match=r"drill\.yaml, line 5: ground\.actions\[1\]\.step"):
+        load_scenario(filename=g)
+
     with pytest.raises(OutOfRangeError, match=r"--scenario-text, line 2: sensors\.nss\.height_m"):
         load_scenario(filename=f, scenario_name="mission",
                       scenario_text="{simulation_duration: 5.0,\n sensors: {nss: {height_m: -1}}}")
