@@ -138,13 +138,13 @@ def test_count_rates_are_the_documented_laws():
 def test_pooling_removes_the_single_record_inversions_bias():
     # 1 s records at W = 0.6 wt%: a record's inversion is convex in its counts, so their
     # mean reads about C0 T / (k N^2) = +0.025 wt% high; the pooled counts do not.
-    from lunar_drake.science.products import pooled_weh
+    from lunar_drake.science.products import summed_weh
 
     cfg = nss.NSSConfig()
     lam = 250.0 / (1.0 + 0.2 * 0.6)  # counts in 1 s at 0.6 wt%, from the documented law
     n = np.random.default_rng(7).poisson(lam, size=20000)
     per_record = nss.weh_from_epithermal(n, np.ones(n.size), config=cfg).mean() - 0.6
-    pooled, sigma = pooled_weh(n, np.ones(n.size), config=cfg)
+    pooled, sigma = (float(v) for v in summed_weh(n.sum(), float(n.size), config=cfg))
     # Standard error of 20000 records: sqrt(lam) / lam^2 * 250 / 0.2 / sqrt(20000), 0.0027.
     se = 250.0 / (0.2 * lam**1.5) / math.sqrt(n.size)
     assert per_record == pytest.approx(250.0 / (0.2 * lam**2), abs=3 * se)  # the bias
@@ -155,12 +155,12 @@ def test_pooling_removes_the_single_record_inversions_bias():
 def test_the_poisson_sigma_matches_the_scatter_of_pooled_cells():
     # 4000 cells of 5 one-second records at 1 wt%: the spread of their pooled estimates
     # against the first-order sigma.
-    from lunar_drake.science.products import pooled_weh
+    from lunar_drake.science.products import summed_weh
 
     cfg = nss.NSSConfig()
     lam = 250.0 / 1.2
     counts = np.random.default_rng(3).poisson(lam, size=(4000, 5))
-    est = np.array([pooled_weh(c, np.ones(5), config=cfg)[0] for c in counts])
+    est = summed_weh(counts.sum(axis=1), 5.0, config=cfg)[0]
     predicted = float(nss.weh_sigma_from_epithermal(5 * lam, 5.0, config=cfg))
     assert est.std() == pytest.approx(predicted, rel=0.05)  # SE of a std: 1.1 %
     assert math.isinf(nss.weh_sigma_from_epithermal(0, 1.0, config=cfg))

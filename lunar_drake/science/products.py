@@ -5,7 +5,7 @@
   (:func:`ground_xy`) -- with the ground's water-equivalent hydrogen from the epithermal
   counts (:func:`~lunar_drake.science.nss.weh_from_epithermal`);
 * :func:`grid_mean`: records averaged into square cells (a heat map);
-* :func:`pooled_weh`: the hydrogen of records pooled together (their summed counts over
+* :func:`summed_weh`: the hydrogen of records pooled together (their summed counts over
   their summed seconds), with its Poisson standard deviation;
 * :func:`nss_truth`: scoring only -- the footprint hydrogen of the world model at the
   rover's *true* position at each sample, and the correlation of the ground's gridded
@@ -113,19 +113,11 @@ def grid_mean(x, y, values, *, cell_m: float, origin=(0.0, 0.0)) -> dict:
     return out
 
 
-def pooled_weh(epithermal, seconds, *, config: NSSConfig) -> tuple[float, float]:
-    """``(weh, sigma)`` (wt%) of records pooled: the inversion of their summed
-    epithermal counts over their summed integration times (the Poisson
-    maximum-likelihood rate, so the per-record inversion's convexity bias mostly goes)
-    and its Poisson standard deviation (:func:`~lunar_drake.science.nss.
-    weh_sigma_from_epithermal`); see :func:`summed_weh`."""
-    w, sd = summed_weh(np.sum(epithermal), np.sum(seconds), config=config)
-    return float(w), float(sd)
-
-
 def summed_weh(counts, seconds, *, config: NSSConfig) -> tuple[np.ndarray, np.ndarray]:
-    """``(weh, sigma)`` (wt%) of summed epithermal ``counts`` over summed ``seconds``
-    (arrays, e.g. one entry per cell): the inversion and its Poisson standard deviation;
+    """``(weh, sigma)`` (wt%) of records pooled: summed epithermal ``counts`` over summed
+    ``seconds`` (arrays, e.g. one entry per cell) -- the Poisson maximum-likelihood rate,
+    so the per-record inversion's convexity bias mostly goes -- inverted, and its Poisson
+    standard deviation (:func:`~lunar_drake.science.nss.weh_sigma_from_epithermal`);
     NaN and infinite where no count fell (no rate to invert)."""
     n = np.asarray(counts, np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -140,7 +132,7 @@ def nss_truth(table: NSSTable, *, truth_times, truth_xy_yaw, hmap, config: NSSCo
     sample (``truth_xy_yaw`` (n, 3) logged at ``truth_times``, interpolated), and the
     Pearson correlation between the ground's estimate and it over ``cell_m`` cells with
     at least ``min_records`` records, binned where the ground puts the detector (each
-    cell: the ground's :func:`pooled_weh` of its records against the mean of their
+    cell: the ground's :func:`summed_weh` of its records against the mean of their
     truths). Returns ``{records, cells, r, truth_weh (array), rmse_wt_pct, bias_wt_pct}``
     (the last two over those cells, the bias their mean estimate less truth)."""
     tt = np.asarray(truth_times, np.float64)
@@ -231,7 +223,7 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
     hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
     one band per quantity, NaN where no record fell, then ``records``, the records per
     cell). NSS: water-equivalent hydrogen of each cell's pooled counts
-    (:func:`pooled_weh`) and its Poisson standard deviation; NIRVSS: every band (the PNG
+    (:func:`summed_weh`) and its Poisson standard deviation; NIRVSS: every band (the PNG
     shows OH); LCS: temperature. Returns the paths."""
     from pathlib import Path
 
@@ -335,7 +327,6 @@ __all__ = [
     "ground_xy",
     "nss_table",
     "nss_truth",
-    "pooled_weh",
     "science_maps",
     "summed_weh",
 ]
