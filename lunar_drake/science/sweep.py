@@ -48,6 +48,11 @@ import numpy as np
 from lunar_drake.render.horizon import line_shifts, sweep_orientation
 from lunar_drake.terrain.crs import MOON_RADIUS_M
 
+#: The kernels may fuse a multiply and an add into one FMA (LLVM's ``contract``, nothing
+#: else of fastmath: NaN and infinity tests keep their meaning). The same instructions
+#: run for a pixel whatever the chunking, so tiles stay byte-identical; about 5 % faster.
+_FUSED = {"contract"}
+
 #: Horizon tangent of a sample with nothing towards the Sun (about -90 deg).
 NO_CASTER = -1.0e6
 _HALF_NO = 0.5 * NO_CASTER
@@ -58,7 +63,7 @@ _HALF_NO = 0.5 * NO_CASTER
 TANGENT, SECTOR, EPOCH, FAR = 0, 1, 2, 3
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _line_height(zc, k, c, s, w, x, inv_r):  # pragma: no cover - numba
     """``zhat`` of line ``k`` at column ``c``; NaN off the grid."""
     nr = zc.shape[0]
@@ -70,7 +75,7 @@ def _line_height(zc, k, c, s, w, x, inv_r):  # pragma: no cover - numba
     return wc * zc[max(a - 1, 0), c] + (1.0 - wc) * zc[a, c] - 0.5 * xc * xc * inv_r
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _push(hx, hz, n, xc, zh):  # pragma: no cover - numba
     """Pushes ``(xc, zh)`` onto the upper hull ``hx[:n], hz[:n]``; returns the new size."""
     while n >= 2:
@@ -86,7 +91,7 @@ def _push(hx, hz, n, xc, zh):  # pragma: no cover - numba
     return n + 1
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _tangent(hx, hz, n, xq, zq, j):  # pragma: no cover - numba
     """``(t, j)``: the steepest ``t = (hz - zq) / (xq - hx)`` over the hull's vertices,
     at vertex ``j`` (found by walking from the guess ``j``: the slope from a point
@@ -126,7 +131,7 @@ def near_plan(sigma: float, step_m: float, near: int, moon_radius_m: float) -> n
     return np.array(rows, dtype=np.float64).reshape(-1, 6)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _near(zc, r, c, sigma, step_m, p_i, p_f, reach):  # pragma: no cover - numba
     """Steepest caster tangent along the pixel's own ray on the bilinear surface: the
     slope leaving the pixel centre and the samples of the plan ``p_i, p_f``
@@ -175,7 +180,7 @@ _DISK_LUT = (np.pi - np.arccos(_LUT_V) + _LUT_V * np.sqrt(1.0 - _LUT_V**2)) / np
 _DISK_LUT[0], _DISK_LUT[-1] = 0.0, 1.0
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _disk_fraction(v):  # pragma: no cover - numba
     """Visible fraction of a uniform disk whose centre is ``v`` radii above a straight
     horizon (the table, interpolated linearly: within 2e-6 of the closed form)."""
@@ -188,7 +193,7 @@ def _disk_fraction(v):  # pragma: no cover - numba
     return _DISK_LUT[i] + (u - i) * (_DISK_LUT[i + 1] - _DISK_LUT[i])
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _fraction(t, lev, j, r, c, par):  # pragma: no cover - numba
     """Visible fraction of the Sun's disk at level ``j`` for horizon tangent ``t``:
     decided in tangent space where the disk is wholly above or below the horizon
@@ -205,7 +210,7 @@ def _fraction(t, lev, j, r, c, par):  # pragma: no cover - numba
     return _disk_fraction(-y / par[8])
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _slope(zc, r, c, inv_res):  # pragma: no cover - numba
     """``(dz/dR, dz/dC)`` per metre by central differences (one-sided at the edges);
     ``inv_res`` = 1 / pixel (1/m)."""
@@ -229,7 +234,7 @@ def _slope(zc, r, c, inv_res):  # pragma: no cover - numba
     return g_r, g_c
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit):  # pragma: no cover
     """The pixel operation of :func:`_sweep` at canonical ``(r, c)`` with horizon tangent
     ``t`` (see :meth:`Sweep.sun_par` for ``par``, :meth:`Sweep.run` for ``lev``)."""
@@ -269,7 +274,7 @@ def _pixel(mode, zc, r, c, t, par, lev, acc_a, acc_b, acc_lit):  # pragma: no co
     acc_b[r, c] += par[9] * par[6] * total
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED)
 def _line(zc, k, s, w, x, inv_r, near, c_start, c_end, hx, hz, zl, vx, vz):  # pragma: no cover
     """The far-field horizon of line ``k`` at every column ``c`` of ``[c_start, c_end)``
     (the columns where it lies on the grid, or a prefix of them): the hull vertex
@@ -291,7 +296,7 @@ def _line(zc, k, s, w, x, inv_r, near, c_start, c_end, hx, hz, zl, vx, vz):  # p
         vz[c] = hz[j]
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _columns(s, lo, hi):  # pragma: no cover - numba
     """``[c0, c1)``: the columns where ``lo <= s[c] <= hi`` (``s`` is monotone)."""
     nc = s.size
@@ -304,7 +309,7 @@ def _columns(s, lo, hi):  # pragma: no cover - numba
     return c0, c1
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, error_model="numpy", fastmath=_FUSED, inline="always")
 def _far_at(fa, fb, f_i, f_w, z_ref, transpose, flip, n_rows, nc, r, c, z):  # pragma: no cover
     """The far tangent (float32) of canonical pixel ``(r, c)`` (``nc`` canonical columns)
     of height ``z``: ``fa - (z - z_ref) fb`` interpolated bilinearly at the pixel's grid
@@ -322,7 +327,7 @@ def _far_at(fa, fb, f_i, f_w, z_ref, transpose, flip, n_rows, nc, r, c, z):  # p
     return np.float32(av - (z - z_ref) * bv)
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
+@numba.njit(parallel=True, cache=True, error_model="numpy", fastmath=_FUSED)
 def _sweep(zc, s, w, x, inv_r, sigma, near, p_i, p_f, k_min, k_max, chunk, mode, par, lev, acc_a,
            acc_b, acc_lit, fa, fb, f_i, f_w, f_par, region):  # fmt: skip  # pragma: no cover
     """Runs the hull sweep over the pixels between lines ``k_min..k_max`` of canonical
