@@ -6,14 +6,14 @@
 A site of ``--size``^2 pixels at ``--resolution`` (4 cm) is synthesized first (``terrain
 synth`` in a child process, cached under ``--cache``; not timed), then ``lunar-drake
 world build`` runs in another: ``seconds`` is its wall time and ``peak_rss_mb`` its peak
-resident memory (``wait4``'s rusage of that child alone; Linux starts a child's peak at
-its parent's, so the parent synthesizes nothing itself); ``stage_seconds`` comes from the
-build's
-``world.json``. Goals (issue 15): 8192^2 in <= 60 s and <= 4 GB; 30720^2 within 15
-minutes and 4 GB. Sites above 80 Mpx build out of core (illumination strips with a
-decimated far field, :mod:`lunar_drake.science.strips`); ``--strip-px N`` forces that
-at any size. ``--compress zstd`` compresses the GeoTIFFs (a 30720^2 stack is 50 GB
-uncompressed). Prints a table; writes JSON with --out.
+resident memory (``wait4``'s rusage of that child alone; Linux charges a child, at its
+exec, with the peak of the process it was forked from, so this one synthesizes nothing
+itself); ``stage_seconds`` comes from the build's ``world.json``. Goals (issue 15):
+8192^2 in <= 60 s and <= 4 GB; 30720^2 within 15 minutes and 4 GB. Sites above 80 Mpx
+build out of core (illumination strips with a decimated far field,
+:mod:`lunar_drake.science.strips`); ``--strip-px N`` forces that at any size.
+``--compress zstd`` compresses the GeoTIFFs (a 30720^2 stack is 50 GB uncompressed).
+Prints a table; writes JSON with --out.
 """
 
 from __future__ import annotations
