@@ -260,6 +260,9 @@ def load_scenario(
 _MESSAGE_KEY = re.compile(r"([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)*)[ :]")
 #: Any further dotted scenario key a message names (``... sensors.nirvss.enabled``).
 _DOTTED_KEY = re.compile(r"(?<![\w.\[\]])([A-Za-z_]\w*(?:\[\d+\])?(?:\.[A-Za-z_]\w*(?:\[\d+\])?)+)")
+#: A key a message names by its short name (``... is above max_ppm = 5``): a lone word
+#: holding an underscore, taken as a sibling of the key the message starts with.
+_SHORT_KEY = re.compile(r"(?<![\w.\[\]])([a-z]\w*_\w*)(?![\w.\[])")
 
 
 def _key_line(node: yaml.Node, key: str) -> int | None:
@@ -286,13 +289,18 @@ def _key_line(node: yaml.Node, key: str) -> int | None:
 def _validate_located(scenario: Scenario, origins: list) -> None:
     """:func:`validate_scenario`; an error naming a key written in one of ``origins``
     (``(source, node)``, the last applied first) gets that source and line in front: the
-    key the message starts with, else any other it names in full (``a.b``)."""
+    key the message starts with, else any other it names in full (``a.b``), else one it
+    names by its short name beside the first (``a.min_x ... above max_x``: ``a.max_x``)."""
     try:
         validate_scenario(scenario)
     except LunarDrakeError as exc:
         msg = str(exc)
         m = _MESSAGE_KEY.match(msg)
         keys = ([m[1]] if m else []) + [k for k in _DOTTED_KEY.findall(msg) if not m or k != m[1]]
+        if m and "." in m[1]:
+            parent = m[1].rsplit(".", 1)[0]
+            short = (f"{parent}.{w}" for w in _SHORT_KEY.findall(msg))
+            keys += [k for k in short if k not in keys]
         for source, node in origins:
             for key in keys if node is not None else ():
                 line = _key_line(node, key)

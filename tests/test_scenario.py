@@ -188,6 +188,11 @@ def test_a_value_out_of_range_names_the_file_and_line_that_wrote_it(tmp_path):
         load_scenario(filename=f, scenario_name="mission",
                       scenario_text="{ground: {route: [{duration_s: 1.0}]},\n flight: "
                                     "{safety: {uplink_timeout_s: 4.0}}}")  # fmt: skip
+    # A key the message names second by its short name, written (the first is a default).
+    with pytest.raises(OutOfRangeError,
+                       match=r"^--scenario-text, line 3: science\.oh\.min_ppm = 100\.0 is above"):
+        load_scenario(filename=f, scenario_name="mission",
+                      scenario_text="science:\n  oh:\n    max_ppm: 50.0\n")  # fmt: skip
     # A default inside a written list element: the element's line.
     g = tmp_path / "drill.yaml"
     g.write_text("sensors: {nirvss: {enabled: true}, drill: {enabled: true}}\nground:\n"
