@@ -34,6 +34,11 @@ from lunar_drake.files import atomic_write_text, check_output_file
 def site_for(size: int, resolution_m: float, seed: int, cache: Path) -> Path:
     """A synthesized site directory (built once per size/resolution/seed, in a child
     process: a 30720^2 synthesis peaks at several GB, which this process must not)."""
+    from lunar_drake.errors import OutputError
+    from lunar_drake.terrain.synth import SynthConfig
+
+    # Bad sizes are refused here, in one line (the child would only print a traceback).
+    SynthConfig(size_px=size, resolution_m=resolution_m, seed=seed)
     d = cache / f"site_{size}_{resolution_m:g}_{seed}"
     if not (d / "site.json").is_file():
         code = (
@@ -42,7 +47,8 @@ def site_for(size: int, resolution_m: float, seed: int, cache: Path) -> Path:
             f"seed={int(seed)}, center_lat_deg=-85.4, center_lon_deg=31.6)\n"
             f"synthesize_site(config=cfg, out_dir={str(d)!r}, progress=True, overview=False)\n"
         )
-        subprocess.run([sys.executable, "-c", code], check=True)
+        if subprocess.run([sys.executable, "-c", code]).returncode != 0:
+            raise OutputError(f"synthesizing the site {str(d)!r} failed (its error is above)")
     return d
 
 
@@ -113,4 +119,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from benchmarks import run_main
+
+    run_main(main, "world_model.py")

@@ -24,3 +24,14 @@ def test_world_model_benchmark_writes_its_json(tmp_path):
     assert "sun over a year" in doc["stage_seconds"]
     assert (tmp_path / "cache" / "site_128_0.04_0" / "site.json").is_file()
     assert "size  pixel m" in proc.stdout
+
+
+def test_world_model_benchmark_refuses_a_bad_size_in_one_line(tmp_path):
+    cmd = [sys.executable, str(ROOT / "benchmarks" / "world_model.py"), "--size", "100",
+           "--cache", str(tmp_path / "cache")]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (
+        "world_model.py: error: ConfigError: size_px = 100 must be a multiple of factor = 32"
+    )
+    assert not (tmp_path / "cache" / "site_100_0.04_0").exists()
