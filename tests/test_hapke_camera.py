@@ -214,7 +214,7 @@ def test_mission_lamps_light_the_night_and_gimbal_looks_down(small_site):
 
 
 def test_render_command_at_any_time(cache, tmp_path):
-    from lunar_drake.render_cli import render_stereo
+    from lunar_drake.cli.render import render_stereo
     from lunar_drake.scenario_files import load_scenario
 
     s = load_scenario(

@@ -295,7 +295,8 @@ def test_ctrl_c_swallowed_before_the_simulation_still_stops_it(small_site):
 def test_ctrl_c_during_an_import_is_an_interrupt_not_a_traceback(monkeypatch, capsys, tmp_path):
     # Ctrl-C while pydrake or Open3D initialises surfaces as "ImportError: initialization
     # failed"; the latch says it was the interrupt.
-    from lunar_drake import cli, interrupts
+    from lunar_drake import interrupts
+    from lunar_drake.cli import world as world_command
 
     def interrupted_import(args):
         try:
@@ -303,14 +304,14 @@ def test_ctrl_c_during_an_import_is_an_interrupt_not_a_traceback(monkeypatch, ca
         except KeyboardInterrupt:
             raise ImportError("initialization failed") from None
 
-    monkeypatch.setattr(cli, "_cmd_world_build", interrupted_import)
+    monkeypatch.setattr(world_command, "command", interrupted_import)
     assert main(["world", "build", str(tmp_path), "--out", str(tmp_path / "w")]) == 130
     assert capsys.readouterr().err.strip() == "lunar-drake: interrupted; partial outputs removed"
 
     def failing_import(args):
         raise ImportError("no module named nothing")
 
-    monkeypatch.setattr(cli, "_cmd_world_build", failing_import)  # no Ctrl-C: a real error
+    monkeypatch.setattr(world_command, "command", failing_import)  # no Ctrl-C: a real error
     with pytest.raises(ImportError):
         main(["world", "build", str(tmp_path), "--out", str(tmp_path / "w")])
 

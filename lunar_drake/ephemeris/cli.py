@@ -1,12 +1,6 @@
 """``lunar-drake ephemeris``: where the Sun and Earth are in a site's sky at a UTC time.
 
-Wire into ``lunar_drake/cli.py``::
-
-    from lunar_drake.ephemeris import cli as ephemeris_cli
-
-    pe = sub.add_parser("ephemeris", help="Sun and Earth in a lunar site's sky (SPICE, DE421)")
-    ephemeris_cli.add_arguments(pe)
-    pe.set_defaults(func=ephemeris_cli.run_cli)
+Wired in by :mod:`lunar_drake.cli.ephemeris`.
 
 Errors are raised as LunarDrakeError subclasses (``main`` turns them into exit code 2).
 """

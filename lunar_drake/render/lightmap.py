@@ -778,15 +778,7 @@ def site_and_grid_north(hf, *, enu_basis, SiteLocation) -> tuple:
 
 def run_cli(args) -> int:
     """``lunar-drake lightmap``: bake a lightmap GeoTIFF; returns the exit status (0).
-
-    Wire into ``lunar_drake/cli.py``::
-
-        from lunar_drake.render import lightmap as lightmap_cli
-
-        lm = sub.add_parser("lightmap", help="bake the terrain lightmap (paper section 5)")
-        lightmap_cli.add_arguments(lm)
-        lm.set_defaults(func=lightmap_cli.run_cli)
-    """
+    Wired in by :mod:`lunar_drake.cli.lightmap`."""
     import time
 
     from lunar_drake.files import check_output_file

@@ -8,8 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
-from lunar_drake.autonomy.planner import plan_path, plot_plan
+from lunar_drake.cli._common import add_subcommand, load_named_scenario
 from lunar_drake.files import atomic_path, atomic_write_text, ensure_output_dir
 
 
@@ -22,6 +21,9 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
     cells, lethal until stereo sees them); returns the plan.json dict. Raises ``OutOfBoundsError`` /
     ``PlanningError`` (one line) for goals off the map, in a hazard or unreachable."""
     from matplotlib.figure import Figure
+
+    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
+    from lunar_drake.autonomy.planner import plan_path, plot_plan
 
     start = (scenario.rover.spawn_x_m, scenario.rover.spawn_y_m) if start_xy is None else start_xy
     rover = RoverEnvelope.of(scenario.rover.description)
@@ -53,8 +55,11 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
         "grid": {"shape": list(cm.shape), "resolution_m": cm.resolution_m},
         "lethal_fraction": round(float(lethal.mean()), 4),
         "unconfirmed_fraction": round(unconfirmed, 4),
-        "confirm_slope_deg": (scenario.ground.map.confirm_slope_deg
-                              if scenario.ground.map.source == "orbital" else None),
+        "confirm_slope_deg": (
+            scenario.ground.map.confirm_slope_deg
+            if scenario.ground.map.source == "orbital"
+            else None
+        ),
         "footprint_radius_m": round(rover.footprint_radius_m, 3),
     }
     atomic_write_text(out / "plan.json", json.dumps(doc, indent=2) + "\n", what="plan summary")
@@ -70,3 +75,42 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
     with atomic_path(Path(out) / "plan.png", what="plot") as tmp:
         fig.savefig(tmp, dpi=110)
     return doc
+
+
+def command(args) -> int:
+    from lunar_drake.scenario_files import apply_overrides
+    from lunar_drake.site import load_site
+
+    scenario, _ = load_named_scenario(args)
+    if args.map is not None:
+        scenario = apply_overrides(scenario, f"{{ground: {{map: {{source: {args.map}}}}}}}")
+    site = load_site(scenario, progress=not args.no_progress)
+    doc = run_plan(
+        scenario=scenario, site=site, goal_xy=args.goal, start_xy=args.start, out_dir=args.out
+    )
+    unconfirmed = ""
+    if doc["unconfirmed_fraction"]:
+        unconfirmed = (f" ({100 * doc['unconfirmed_fraction']:.1f}% unconfirmed: steeper than "
+                       f"{doc['confirm_slope_deg']:g} deg on the orbital map)")  # fmt: skip
+    print(
+        f"Path on the {doc['map']} map: {doc['waypoint_length_m']:.1f} m (straight line "
+        f"{doc['straight_line_m']:.1f} m), {doc['waypoints']} waypoints; "
+        f"{100 * doc['lethal_fraction']:.1f}% of the map is hazard{unconfirmed}"
+    )
+    print(f"Outputs: {Path(args.out).resolve()} (plan.png, path.csv, plan.json)")
+    return 0
+
+
+def add_parser(sub) -> None:
+    pn = add_subcommand(sub, "plan", help="plan a hazard-free path on the ground's map of a site")
+    pn.add_argument("--scenario", default="default", help="scenario name or FILE.yaml[:NAME]")
+    pn.add_argument("--scenario-text", default="{}", help="YAML overrides")
+    pn.add_argument("--goal", type=float, nargs=2, required=True, metavar=("X", "Y"),
+                    help="goal in the site frame (m)")  # fmt: skip
+    pn.add_argument("--start", type=float, nargs=2, default=None, metavar=("X", "Y"),
+                    help="start (m; default: the rover's spawn point)")  # fmt: skip
+    pn.add_argument("--map", choices=["truth", "orbital"], default=None,
+                    help="the a-priori map (default: scenario ground.map.source)")  # fmt: skip
+    pn.add_argument("--out", required=True, help="output directory")
+    pn.add_argument("--no-progress", action="store_true")
+    pn.set_defaults(func=command)

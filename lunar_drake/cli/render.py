@@ -1,4 +1,5 @@
-"""``lunar-drake render``: one stereo pair of a scenario, written as image files."""
+"""``lunar-drake render``: one stereo pair of a scenario, written as image files
+(:func:`render_stereo`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lunar_drake.cli._common import add_subcommand, load_named_scenario
 from lunar_drake.errors import ConfigError
 from lunar_drake.files import (
     atomic_path,
@@ -87,3 +89,27 @@ def render_stereo(*, scenario, time_s: float = 0.0, out_dir, progress: bool = Tr
         atomic_write_text(tmp / "render.json", json.dumps(info, indent=2) + "\n")
     names = [f"{n}{s}" for n in ("left", "right") for s in (".png", "_preview.png")]
     return [out / n for n in names] + [out / "render.json"]
+
+
+def command(args) -> int:
+    scenario, _ = load_named_scenario(args)
+    paths = render_stereo(
+        scenario=scenario, time_s=args.time, out_dir=args.out, progress=not args.no_progress
+    )
+    for p in paths:
+        print(p)
+    return 0
+
+
+def add_parser(sub) -> None:
+    rd = add_subcommand(sub, "render", help="render the mast stereo pair of a scenario")
+    rd.add_argument(
+        "--scenario",
+        default="default",
+        help="scenario name in the packaged file, or FILE.yaml[:NAME]",
+    )
+    rd.add_argument("--scenario-text", default="{}", help="YAML overrides")
+    rd.add_argument("--time", type=float, default=0.0, help="sim time of the frame (s)")
+    rd.add_argument("--out", required=True, help="output directory")
+    rd.add_argument("--no-progress", action="store_true")
+    rd.set_defaults(func=command)

@@ -1,0 +1,373 @@
+"""``lunar-drake run``: simulate a mission scenario and write its run directory."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+from lunar_drake.cli._common import add_subcommand, plural, split_scenario
+from lunar_drake.errors import ConfigError
+
+#: Simulated seconds per wall second on a 2-core machine (low, high), with the stereo
+#: cameras and without: the range of `benchmarks/mission_rate.py` and whole default
+#: missions measured here (issue 29: 1.26x-1.7x with cameras, 8.4x without). Only for
+#: the estimate printed before a run.
+REALTIME_FACTOR = {"cameras": (1.2, 2.0), "no_cameras": (6.0, 10.0)}
+#: Bytes per pixel of one camera's saved frame (16-bit raw PNG + 8-bit preview PNG of
+#: the noisy 12-bit codes), measured on default-site frames.
+FRAME_BYTES_PER_PX = 1.6
+#: Meshcat's static replay (meshcat.html): bytes per simulated second of recording, and
+#: per terrain mesh vertex (``terrain_view.max_mesh_px`` squared), measured on the
+#: default and small scenarios.
+MESHCAT_BYTES_PER_S = 1.3e5
+MESHCAT_BYTES_PER_VERTEX = 40.0
+
+
+def run_estimate(scenario, *, meshcat: bool) -> dict:
+    """What a run of ``scenario`` will cost, roughly, before it starts: ``minutes``
+    (low, high) on a 2-core machine (:data:`REALTIME_FACTOR`), ``frames_bytes`` (the
+    saved stereo frames), ``meshcat_bytes`` (the static replay, 0 without Meshcat) and
+    ``total_bytes``. An estimate from constants measured here, not a promise."""
+    cam = scenario.sensors.camera
+    duration = float(scenario.simulation_duration)
+    rtf = REALTIME_FACTOR["cameras" if cam.enabled else "no_cameras"]
+    frames = 0.0
+    if cam.enabled and scenario.logging.save_frames:
+        n = math.floor(duration * cam.rate_hz)
+        frames = n * 2 * cam.width * cam.height * FRAME_BYTES_PER_PX
+    html = 0.0
+    if meshcat:
+        px = scenario.terrain_view.max_mesh_px
+        html = MESHCAT_BYTES_PER_S * duration + MESHCAT_BYTES_PER_VERTEX * px * px
+    return {
+        "minutes": (duration / rtf[1] / 60.0, duration / rtf[0] / 60.0),
+        "frames_bytes": frames,
+        "meshcat_bytes": html,
+        "total_bytes": frames + html,
+    }
+
+
+def _minutes(lo: float, hi: float) -> str:
+    if hi < 1.0:
+        return "under a minute"
+    if lo < 1.0:
+        return f"up to {math.ceil(hi)} min"
+    return f"roughly {round(lo)}-{math.ceil(hi)} min"
+
+
+def describe_estimate(scenario, *, meshcat: bool, out: Path) -> str:
+    """The line printed before a run: simulated time, cameras, the estimated wall time
+    and disk use, and, for a long or large run, where to start instead."""
+    e = run_estimate(scenario, meshcat=meshcat)
+    cam = scenario.sensors.camera.enabled
+    parts = []
+    if e["meshcat_bytes"]:
+        parts.append(f"meshcat.html ~{e['meshcat_bytes'] / 1e6:.0f} MB")
+    if e["frames_bytes"]:
+        parts.append(f"frames/ ~{e['frames_bytes'] / 1e6:.0f} MB")
+    size = f"about {e['total_bytes'] / 1e6:.0f} MB" if parts else "a few MB"
+    detail = f" ({', '.join(parts)})" if parts else ""
+    text = (
+        f"This run simulates {scenario.simulation_duration:g} s "
+        f"{'with' if cam else 'without'} the stereo cameras: {_minutes(*e['minutes'])} on "
+        f"2 cores, and writes {size}{detail} to {out}."
+    )
+    if e["minutes"][1] > 3.0 or e["total_bytes"] > 50e6:
+        text += (
+            " For a first look: --scenario small (seconds); --no-cameras and --no-meshcat "
+            "make any run faster and smaller."
+        )
+    return text
+
+
+def _soil_override(arg: str) -> dict:
+    """``--soil NAME`` (a preset) or ``--soil FILE.yaml`` (a soil section) as overrides."""
+    import dataclasses as dc
+
+    import yaml
+
+    from lunar_drake.dynamics import terramechanics as tm
+
+    if arg.endswith((".yaml", ".yml")):
+        path = Path(arg)
+        if not path.is_file():
+            raise ConfigError(f"--soil {arg!r} does not exist")
+        try:
+            data = yaml.safe_load(path.read_text())
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--soil {arg!r} is not valid YAML: {exc}") from None
+        if isinstance(data, dict) and set(data) == {"soil"}:
+            data = data["soil"]
+        if not isinstance(data, dict):
+            raise ConfigError(f"--soil {arg!r} must hold a mapping of soil parameters")
+        return {"soil": data}
+    try:
+        return {"soil": dc.asdict(tm.soil_preset(arg))}
+    except ConfigError as exc:
+        raise ConfigError(f"--soil: {exc}") from None
+
+
+def resolve_run_scenario(args):
+    """The scenario of ``lunar-drake run``: the named or given scenario, then
+    ``--scenario-text``, then the flags as overrides of scenario fields (so the run's
+    ``scenario.yaml`` says everything). With ``ground.goals`` the route is unused and
+    is emptied, so ``scenario.yaml`` shows only what drives the rover."""
+    import yaml
+
+    from lunar_drake.scenario_files import apply_overrides, load_scenario
+
+    filename, name = split_scenario(args.scenario)
+    scenario = load_scenario(
+        filename=filename, scenario_name=name, scenario_text=args.scenario_text
+    )
+    flags: dict = {}
+    if args.duration is not None:
+        flags["simulation_duration"] = float(args.duration)
+    if args.no_cameras:
+        flags["sensors"] = {"camera": {"enabled": False}}
+    if args.soil is not None:
+        flags.update(_soil_override(args.soil))
+    if flags:
+        scenario = apply_overrides(
+            scenario, yaml.safe_dump(flags, default_flow_style=True), source="command-line flags"
+        )
+    if scenario.ground.goals:
+        scenario.ground.route = []
+    return scenario, name
+
+
+def describe_goals(goals: list) -> str:
+    """The console's goal line from ``summary.json``'s ``goals`` (scored on truth): how
+    many were reached and, when not all, the first goal not reached and how close the
+    rover came to it."""
+    got = sum(g["reached"] for g in goals)
+    head = f"Goals: {got} of {len(goals)} reached (truth"
+    missed = [(k, g) for k, g in enumerate(goals) if not g["reached"]]
+    if not missed:
+        last = goals[-1]["final_distance_m"]
+        return f"{head}; at the end the rover was {last:.2f} m from the last)"
+    k, g = missed[0]
+    x, y = g["goal_xy_m"]
+    more = f"; {len(missed) - 1} more not reached" if len(missed) > 1 else ""
+    return (f"{head}); goal {k + 1} at ({x:g}, {y:g}) m not reached: the rover came within "
+            f"{g['closest_m']:.2f} m of it{more}")  # fmt: skip
+
+
+def map_line(scenario) -> str | None:
+    """The console line of the ground's a-priori map when it is the oracle (``truth``)."""
+    if scenario.ground.map.source != "truth":
+        return None
+    return ("Ground: planning on the TRUE map (oracle): ground.map.source is truth; a real "
+            "mission has only the orbital map")  # fmt: skip
+
+
+def command(args) -> int:
+    from lunar_drake import metrics, outputs
+    from lunar_drake.files import check_replaceable, staged_directory
+    from lunar_drake.science.world import needs_world, run_world
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
+    scenario, name = resolve_run_scenario(args)
+    out = Path(args.out) if args.out else Path("runs") / (scenario.name or name)
+    check_replaceable(out, allowed=outputs.RUN_DIR_NAMES, what="run directory")
+    print(describe_estimate(scenario, meshcat=not args.no_meshcat, out=out), flush=True)
+    if line := map_line(scenario):
+        print(line, flush=True)
+    meshcat = None
+    if not args.no_meshcat:
+        from pydrake.geometry import Meshcat, MeshcatParams
+
+        meshcat = Meshcat(MeshcatParams(host=args.meshcat_host))
+        print(f"Meshcat: {meshcat.web_url()}", flush=True)
+    print(
+        f"Scenario {scenario.name or name!r} (seed {scenario.random_seed}); building the site...",
+        flush=True,
+    )
+    with staged_directory(out, what="run directory") as tmp:
+        t0 = time.perf_counter()
+        site = load_site(scenario, progress=not args.no_progress)
+        t_site = time.perf_counter() - t0
+        if needs_world(scenario):
+            print("Building the world model (science sensors)...", flush=True)
+            t0 = time.perf_counter()
+            world_dir, cached = run_world(scenario=scenario, site=site,
+                                          progress=not args.no_progress)  # fmt: skip
+            print(f"World model: {'cached' if cached else 'built'} in "
+                  f"{time.perf_counter() - t0:.1f} s ({world_dir})", flush=True)  # fmt: skip
+        logs = simulate(
+            scenario=scenario,
+            site=site,
+            meshcat=meshcat,
+            progress=not args.no_progress,
+            frames_dir=tmp / "frames" if scenario.logging.save_frames else None,
+        )
+        summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
+        timing = {
+            "site_s": t_site,
+            "site_cached": bool(site.site.cached) if site.site else False,
+            "site_dir": str(site.site.directory or site.site.dem) if site.site else "",
+            **logs.wall,
+        }
+        outputs.write_run(
+            tmp,
+            scenario=scenario,
+            logs=logs,
+            summary=summary,
+            timing=timing,
+            meshcat_html=meshcat.StaticHtml() if meshcat is not None else None,
+            site=site,
+        )
+    _report(summary, timing=timing, t_site=t_site, scenario=scenario, out=out,
+            meshcat=meshcat)  # fmt: skip
+    if meshcat is not None:
+        print(f"Meshcat: {meshcat.web_url()} (static replay: {out / 'meshcat.html'})")
+        if args.wait:
+            print("Serving Meshcat; press Ctrl-C to stop.", flush=True)
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+    return 0
+
+
+def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, meshcat):
+    s = summary["site"]
+    print(
+        f"Site: {s['shape_px'][0]}x{s['shape_px'][1]} px at {s['resolution_m']:g} m"
+        + (f", {s['craters']} craters, {s['rocks']} rocks" if "craters" in s else "")
+        + f" ({'cached' if timing['site_cached'] else 'built'} in {t_site:.1f} s; "
+        f"{timing['site_dir']})"
+    )
+    rtf = timing["realtime_factor"]
+    print(
+        f"Simulated {summary['simulated_s']:.2f} s in {timing['simulate_s']:.2f} s "
+        + (f"({rtf:.1f}x real time; " if rtf else "(")
+        + f"diagram built in {timing['build_s']:.2f} s); stop: {summary['stop_reason']}"
+    )
+    rv = summary["rover"]
+    print(
+        f"Rover: drove {rv['distance_m']:.1f} m, mean slip {100 * rv['mean_slip_moving']:.1f}%, "
+        f"max sinkage {100 * rv['max_sinkage_m']:.1f} cm, max tilt {rv['max_tilt_deg']:.1f} deg, "
+        f"drive energy {rv['energy_J']:.0f} J"
+    )
+    loc = summary["localization"]
+    if loc:
+        print(
+            f"On-board estimate at the end: {loc['final_position_error_m']:.2f} m off, "
+            f"heading {loc['final_heading_error_deg']:.2f} deg off; ground received "
+            f"{plural(summary['telemetry_received'], 'telemetry packet')}"
+        )
+    if summary.get("goals"):
+        print(describe_goals(summary["goals"]))
+    gr = summary["ground"]
+    if gr["goals"]:
+        on_ground = sum(g["status"] == "reached" for g in gr["goals"])
+        hz = summary["hazards"]
+        print(
+            f"Ground: {on_ground} of {len(gr['goals'])} goals reached on its estimate, "
+            f"{plural(gr['plans'], 'plan')} ({gr['replans']} replans); "
+            f"hazard strikes {hz['strikes']}"
+        )
+    md = summary["modes"]
+    safings = ", ".join(f"{n} {k}" for k, n in md["safings"].items()) or "none"
+    print(f"Modes: {plural(md['count'], 'mode change')} on board; safings: {safings}")
+    if summary.get("images_received"):
+        print(
+            f"Images: the ground received {plural(summary['images_received'], 'stereo frame')}"
+            f" ({summary['images_bytes_received'] / 1e6:.1f} MB)"
+        )
+    per = summary.get("perception") or {}
+    if per.get("keyframes"):
+        vo = ", ".join(f"{n} {k}" for k, n in per["vo"].items())
+        sigma = per.get("final_sigma_m")
+        drift = f"; the ground's position sigma {sigma:.2f} m" if sigma is not None else ""
+        print(f"Perception: {plural(per['keyframes'], 'stereo keyframe')} (VO: {vo}); "
+              f"{per['lethal_cells_added']} lethal cells added to the ground's map"
+              f"{drift}")  # fmt: skip
+    sci = summary.get("science") or {}
+    if "nirvss_records" in sci:
+        rmse = sci.get("lcs_rmse_K")
+        lcs = f"; LCS {rmse:.2f} K RMS from the truth" if rmse is not None else ""
+        drill = f"; {sci['drill_samples']} drill samples" if "drill_samples" in sci else ""
+        print(
+            f"Science: the ground received "
+            f"{plural(sci['nirvss_records'], 'NIRVSS record')}{lcs}{drill}"
+        )
+    if "nss_records" in sci:
+        r = sci.get("nss_truth_r")
+        score = f"; against truth r = {r:.2f} over {sci['nss_cells']} cells of 2 m" if r else ""
+        print(f"Science: the ground received {plural(sci['nss_records'], 'NSS record')}"
+              + (f", mean hydrogen {sci['weh_est_mean_wt_pct']:.2f} wt% WEH (truth "
+                 f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")
+              + score)  # fmt: skip
+    from lunar_drake import outputs
+
+    files = outputs.run_files()
+    for name in (
+        "nss.csv",
+        "nss_map.png",
+        "nss_map.tif",
+        "nirvss.csv",
+        "nirvss_map.png",
+        "nirvss_map.tif",
+        "lcs.csv",
+        "lcs_map.png",
+        "lcs_map.tif",
+        "drill.csv",
+    ):
+        if (out / name).exists():
+            files.append(name)
+    if per.get("keyframes"):
+        files.append("keyframes.csv")
+    if (out / "ground_map.png").exists():
+        files.append("ground_map.png")
+    if scenario.sensors.camera.enabled:
+        files.append("calibration.yaml")
+    if summary["camera_frames"]:
+        files.append(f"frames/ ({plural(summary['camera_frames'], 'stereo frame')})")
+    if meshcat is not None:
+        files.append("meshcat.html")
+    print(f"Outputs: {out.resolve()} ({', '.join(files)})")
+
+
+def add_parser(sub) -> None:
+    r = add_subcommand(
+        sub, "run", help="run a mission scenario (the main job)",
+        epilog="The default scenario simulates 700 s with the stereo cameras: minutes on "
+               "2 cores and a few hundred MB of frames and Meshcat replay. For a first "
+               "look: lunar-drake run --scenario small. List the scenarios with "
+               "lunar-drake scenarios.",
+    )  # fmt: skip
+    r.add_argument(
+        "--scenario",
+        default="default",
+        help="scenario name in the packaged file (lunar-drake scenarios lists them), "
+        "FILE.yaml[:NAME], or a run's scenario.yaml to repeat it",
+    )
+    r.add_argument("--scenario-text", default="{}", help="YAML overrides, e.g. '{random_seed: 3}'")
+    r.add_argument("--duration", type=float, default=None,
+                   help="simulated seconds (sets simulation_duration; default: the "
+                        "scenario's)")  # fmt: skip
+    r.add_argument("--out", default=None, help="run directory (default: runs/<scenario>)")
+    r.add_argument("--no-meshcat", action="store_true",
+                   help="headless: no Meshcat server and no meshcat.html")  # fmt: skip
+    r.add_argument(
+        "--meshcat-host",
+        default="127.0.0.1",
+        help="interface Meshcat listens on ('*' opens it to the network)",
+    )
+    r.add_argument(
+        "--no-cameras",
+        action="store_true",
+        help="skip the Hapke stereo cameras (sets sensors.camera.enabled: false): much "
+        "faster, no frames; the ground then has no stereo",
+    )
+    r.add_argument("--soil", default=None,
+                   help="soil preset (lunar_regolith, grc1, jsc1a) or a soil YAML file "
+                        "(default: the scenario's soil)")  # fmt: skip
+    r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
+    r.add_argument("--no-progress", action="store_true", help="no progress bars")
+    r.set_defaults(func=command)
