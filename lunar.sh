@@ -1,9 +1,5 @@
 #!/usr/bin/env bash
-# Sets up lunar_drake on a fresh machine (first call) and runs it.
-#   ./lunar.sh run [lunar-drake run options]   the default mission, headless
-#   ./lunar.sh test [pytest options]           the test suite (and ruff)
-#   ./lunar.sh setup                           set-up only
-#   ./lunar.sh <anything else>                 runs `lunar-drake <anything else>`
+# Sets up lunar_drake on a fresh machine (first call) and runs it; usage() below says how.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 cd "$here"
@@ -40,9 +36,32 @@ python_deps() {
 
 setup() { system_deps; python_deps; }
 
+usage() {
+  cat <<'EOF'
+Usage: ./lunar.sh [COMMAND [OPTIONS]]
+
+Sets up lunar_drake on first use (a Python virtual environment in .venv, and the system
+library libusb-1.0 that open3d needs; a few minutes), then runs COMMAND:
+
+  ./lunar.sh setup                  set-up only
+  ./lunar.sh run [OPTIONS]          a mission (the default one if no --scenario; also
+                                    what ./lunar.sh alone does): minutes on 2 cores and a
+                                    few hundred MB in runs/default; --scenario small is a
+                                    first look in seconds
+  ./lunar.sh test [PYTEST OPTIONS]  ruff, then the test suite
+  ./lunar.sh scenarios              the shipped scenarios, one line each
+  ./lunar.sh COMMAND [OPTIONS]      any lunar-drake command: run, scenarios, plan, render,
+                                    terrain synth, world build, slip-study, vo-study,
+                                    slip-fit, ephemeris, lightmap
+  ./lunar.sh COMMAND --help         the options of one command
+  ./lunar.sh help | -h | --help     this text (no set-up)
+EOF
+}
+
 cmd="${1:-run}"
 [ $# -gt 0 ] && shift
 case "$cmd" in
+  help|-h|--help) usage ;;
   setup) setup ;;
   run) setup; exec "$venv/bin/lunar-drake" run "$@" ;;
   test)

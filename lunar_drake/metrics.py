@@ -201,7 +201,8 @@ def hazards(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
 
 def link_stats(logs: SimulationLogs) -> dict:
     """Per direction: messages and bytes offered, delivered, still in flight, dropped
-    (and why), and the delivery latency (s; min and max)."""
+    (and why), and the delivery latency of what was delivered (``latency_s``: ``min``,
+    ``median``, ``max``, s from sending to receipt; None when nothing was)."""
     out = {}
     for direction in ("uplink", "downlink"):
         rows = [r for r in logs.link if r.direction == direction]
@@ -216,7 +217,11 @@ def link_stats(logs: SimulationLogs) -> dict:
             "dropped_by_reason": {
                 k: n for k in DROP_REASONS if (n := sum(1 for r in rows if r.reason == k))
             },
-            "latency_s": [_r(min(lat)), _r(max(lat))] if lat else None,
+            "latency_s": (
+                {"min": _r(min(lat)), "median": _r(float(np.median(lat))), "max": _r(max(lat))}
+                if lat
+                else None
+            ),
         }
     return out
 

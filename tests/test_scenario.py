@@ -89,8 +89,9 @@ def test_one_of_everything_builds_and_simulates_a_second(cache, tmp_path):
     summary = metrics.summarize(scenario=s, site=site, logs=logs)
     assert summary["site"]["shape_px"] == [256, 256]  # 32 px DEM x 8
     assert summary["rover"]["distance_m"] > 0.01  # it drove
-    lo, hi = summary["link"]["uplink"]["latency_s"]  # commands: 0.15 s + jitter [0, 0.01]
-    assert 0.15 <= lo <= hi <= 0.16 + 2e-6
+    lat = summary["link"]["uplink"]["latency_s"]  # commands: 0.15 s + jitter [0, 0.01]
+    assert set(lat) == {"min", "median", "max"}
+    assert 0.15 <= lat["min"] <= lat["median"] <= lat["max"] <= 0.16 + 2e-6
     # Starts at 0.1 s: frames at 0.5 s (delivered 0.6 s) and 1.0 s (due after the end).
     assert logs.frames_written == 1
     imu = logs.vectors["rover.imu"]
