@@ -145,7 +145,10 @@ class Costmap:
     0 north; ``slope_deg``, ``step_m``, ``roughness_m`` the layers; ``lethal_raw`` the
     hazards before inflation, ``unconfirmed`` among them; ``x0_m``, ``y1_m``: site
     coordinates of the grid's west and north edges; ``resolution_m``; ``unconfirmed``
-    (bool, or None): cells lethal only until stereo has seen them (module docstring)."""
+    (bool, or None): cells lethal only until stereo has seen them (module docstring);
+    ``max_slope_deg``, ``max_step_m``: the limits a hazard breaks, and
+    ``inflation_radius_m`` (the footprint radius plus the inflation, m) round each
+    hazard (inf, inf, 0 when unknown), so errors can say why a cell is lethal."""
 
     cost: np.ndarray
     slope_deg: np.ndarray
@@ -156,6 +159,9 @@ class Costmap:
     y1_m: float
     resolution_m: float
     unconfirmed: np.ndarray | None = None
+    max_slope_deg: float = math.inf
+    max_step_m: float = math.inf
+    inflation_radius_m: float = 0.0
 
     @property
     def shape(self) -> tuple:
@@ -276,6 +282,9 @@ def costmap_from_layers(*, slope_deg, step_m, roughness_m, lethal_raw, resolutio
         y1_m=float(y1_m),
         resolution_m=float(resolution_m),
         unconfirmed=unconfirmed,
+        max_slope_deg=float(config.max_slope_deg),
+        max_step_m=float(hazard_limits(config, rover)[2]),
+        inflation_radius_m=float(radius),
     )
 
 

@@ -83,6 +83,59 @@ def nearest_free_cell(costmap: Costmap, cell, radius_m: float):
     return int(rr[ok][i]), int(cc[ok][i])
 
 
+def _what_breaks(costmap: Costmap, cell, subject: str) -> str:
+    """``subject`` and what makes the hazard ``cell`` (row, col) lethal: the limits its
+    layers break, or (none: a stereo hazard by stereo's own rule, a hand-made map) that
+    it is marked lethal, with its layers."""
+    slope, step = float(costmap.slope_deg[cell]), float(costmap.step_m[cell])
+    broken = []
+    if slope > costmap.max_slope_deg:
+        broken.append(f"slope {slope:.1f} deg > max {costmap.max_slope_deg:g} deg")
+    if step > costmap.max_step_m:
+        broken.append(f"step {step:.2f} m > max {costmap.max_step_m:.2f} m")
+    if broken:
+        return f"{subject} breaks {' and '.join(broken)}"
+    return f"{subject} is marked lethal (slope {slope:.1f} deg, step {step:.2f} m)"
+
+
+def hazard_reason(costmap: Costmap, cell) -> str:
+    """Why the lethal ``cell`` (row, col) of ``costmap`` is lethal, in words: the
+    limit(s) the cell breaks; steep on the orbital map and not yet seen by stereo; or
+    the nearest hazard within the rover's footprint plus inflation
+    (``costmap.inflation_radius_m``), where it is and what it breaks."""
+    cell = (int(cell[0]), int(cell[1]))
+    unconfirmed = costmap.unconfirmed
+    if costmap.lethal_raw[cell]:
+        if unconfirmed is not None and unconfirmed[cell]:
+            return (
+                f"slope {costmap.slope_deg[cell]:.1f} deg on the orbital map, over "
+                "ground.map.confirm_slope_deg: lethal until stereo has seen it; choose "
+                "another goal, or set confirm_slope_deg: 0 to trust the orbital map"
+            )
+        return _what_breaks(costmap, cell, "its cell")
+    res = costmap.resolution_m
+    k = math.ceil(costmap.inflation_radius_m / res) + 1
+    r0, r1 = max(0, cell[0] - k), min(costmap.shape[0], cell[0] + k + 1)
+    c0, c1 = max(0, cell[1] - k), min(costmap.shape[1], cell[1] + k + 1)
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    d = np.hypot(rr - cell[0], cc - cell[1]) * res
+    d = np.where(costmap.lethal_raw[r0:r1, c0:c1], d, np.inf)
+    i = np.unravel_index(int(np.argmin(d)), d.shape)
+    if not np.isfinite(d[i]):
+        return "lethal, with no hazard near it (a hand-made map?)"
+    h = (int(rr[i]), int(cc[i]))
+    hx, hy = (float(v) for v in costmap.centre_of(*h))
+    if unconfirmed is not None and unconfirmed[h]:
+        what = (f"steep on the orbital map ({costmap.slope_deg[h]:.1f} deg, over "
+                "ground.map.confirm_slope_deg), lethal until stereo has seen it")  # fmt: skip
+    else:
+        what = _what_breaks(costmap, h, "which")
+    return (
+        f"within the rover's footprint plus inflation ({costmap.inflation_radius_m:.2f} m) "
+        f"of a hazard {d[i]:.2f} m away at ({hx:.2f}, {hy:.2f}) m, {what}"
+    )
+
+
 def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float = 0.0,
               goal_free_radius_m: float = 0.0) -> Path:  # fmt: skip
     """The least-cost path from ``start_xy`` to ``goal_xy`` (site, m).
@@ -97,8 +150,9 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
     Raises:
         OutOfBoundsError: start or goal off the map.
         PlanningError: goal (or start) inside a hazard (lethal or within the rover's
-            footprint of one) with no free cell within ``goal_free_radius_m``, or no
-            hazard-free path joins them.
+            footprint of one; the message says which limit: :func:`hazard_reason`) with
+            no free cell within ``goal_free_radius_m``, or no hazard-free path joins
+            them.
     """
     s = _cell(costmap, start_xy, "start")
     g = _cell(costmap, goal_xy, "goal")
@@ -107,19 +161,9 @@ def plan_path(*, costmap: Costmap, start_xy, goal_xy, start_free_radius_m: float
         moved = nearest_free_cell(costmap, g, goal_free_radius_m) if goal_free_radius_m else None
         if moved is None:
             near = f" and no free cell lies within {goal_free_radius_m:g} m of it"
-            why = (
-                f"slope {costmap.slope_deg[g]:.1f} deg, step {costmap.step_m[g]:.2f} m, or "
-                "within the rover's footprint of one"
-            )
-            if costmap.unconfirmed is not None and costmap.unconfirmed[g]:
-                why = (
-                    f"slope {costmap.slope_deg[g]:.1f} deg on the orbital map, over "
-                    "ground.map.confirm_slope_deg: lethal until stereo has seen it; choose "
-                    "another goal, or set confirm_slope_deg: 0 to trust the orbital map"
-                )
             raise PlanningError(
                 f"goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) m is inside a hazard "
-                f"({why})" + (near if goal_free_radius_m else "")
+                f"({hazard_reason(costmap, g)})" + (near if goal_free_radius_m else "")
             )
         g = moved
         end_xy = tuple(float(v) for v in costmap.centre_of(*g))
