@@ -35,7 +35,8 @@ import numpy as np
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
     lut_axis_f32,
-    lut_reflectance_at_f32,
+    lut_cell_f32,
+    trilerp,
 )
 from lunar_drake.render.heightfield_trace import DemPyramid, pixel_direction, trace_heightfield
 from lunar_drake.render.raycast import (
@@ -59,8 +60,9 @@ from lunar_drake.render.regolith import (
     build_texture,
     inverse_footprint,
     load_i32,
+    octave_blend,
+    octave_cell,
     octave_weight,
-    sample_octave,
     wrap_coordinates,
 )
 from lunar_drake.render.shading import (
@@ -125,64 +127,64 @@ def _tex(a, p, x, y):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def _tex3(a, p, x, y):
-    """Bilinear sample of the three channels of an (h, w, 3) float32 texture (as
-    :func:`_tex`, edge clamped; cell position in float64, weights and sum in float32)."""
-    h = a.shape[0]
-    w = a.shape[1]
+def _surface_cell(h, w, p, x, y):
+    """The bilinear cell of the (h, w, 3) surface texture at site (x, y), edge clamped
+    (the RasterSampler convention): ``(k, dc, dr, fc, fr)``, the flat int32 index of
+    channel 0 at its (r0, c0) corner, the index steps to the next column and row (0 at
+    a clamped edge) and the float32 fractions (cell position in float64)."""
     col = (x - p[2]) * p[0] - 0.5
     row = (p[3] - y) * p[1] - 0.5
     col = min(max(col, 0.0), w - 1.0)
     row = min(max(row, 0.0), h - 1.0)
-    c0 = min(int(col), max(w - 2, 0))
-    r0 = min(int(row), max(h - 2, 0))
-    c1 = min(c0 + 1, w - 1)
-    r1 = min(r0 + 1, h - 1)
+    # col, row >= 0: int32 truncation is int() (and vectorizes)
+    c0 = min(np.int32(col), np.int32(max(w - 2, 0)))
+    r0 = min(np.int32(row), np.int32(max(h - 2, 0)))
+    c1 = min(c0 + np.int32(1), np.int32(w - 1))
+    r1 = min(r0 + np.int32(1), np.int32(h - 1))
     fc = np.float32(col - c0)
     fr = np.float32(row - r0)
-    one = np.float32(1.0)
-    w00 = (one - fr) * (one - fc)
-    w01 = (one - fr) * fc
-    w10 = fr * (one - fc)
-    w11 = fr * fc
-    # flat 32-bit indices into the C-contiguous texture (load_i32: 32-bit-index gathers)
-    k00 = np.int32((r0 * w + c0) * 3)
-    k01 = np.int32((r0 * w + c1) * 3)
-    k10 = np.int32((r1 * w + c0) * 3)
-    k11 = np.int32((r1 * w + c1) * 3)
-    o0 = (
-        w00 * load_i32(a, k00)
-        + w01 * load_i32(a, k01)
-        + w10 * load_i32(a, k10)
-        + w11 * load_i32(a, k11)
-    )
-    o1 = (
-        w00 * load_i32(a, k00 + 1)
-        + w01 * load_i32(a, k01 + 1)
-        + w10 * load_i32(a, k10 + 1)
-        + w11 * load_i32(a, k11 + 1)
-    )
-    o2 = (
-        w00 * load_i32(a, k00 + 2)
-        + w01 * load_i32(a, k01 + 2)
-        + w10 * load_i32(a, k10 + 2)
-        + w11 * load_i32(a, k11 + 2)
-    )
-    return o0, o1, o2
+    w32 = np.int32(w)
+    three = np.int32(3)
+    return (r0 * w32 + c0) * three, (c1 - c0) * three, (r1 - r0) * w32 * three, fc, fr
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out):
+def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, KI, F3, T8):
     """``out[j] = irradiance * r`` of the distant light toward (lx, ly, lz) for the
-    row's pixels j < n, all float32 (vector code; the light is passed as scalars, not
-    an array whose loads the stores could alias)."""
+    row's pixels j < n, all float32, in three loops: table cells (vector code), the
+    eight corner reads (a loop of loads only), the trilinear blend (vector code). The
+    light is passed as scalars, not an array whose loads the stores could alias.
+
+    Loads through computed indices keep a loop scalar where the compiler does not emit
+    gathers (AMD Zen: no ``fast-gather``), so they get a loop of their own."""
     m = np.float32(lut.shape[0] - 1)
     for j in range(n):
         ci = NX[j] * lx + NY[j] * ly + NZ[j] * lz
         cg = -(D0[j] * lx + D1[j] * ly + D2[j] * lz)
         # ci <= 0 reads the table's last i row, which is 0: no light, no branch
-        r = irradiance * lut_reflectance_at_f32(lut, lut_axis_f32(ci, m), YE[j], cg)
-        out[j] = r
+        k, fx, fy, fz = lut_cell_f32(lut, lut_axis_f32(ci, m), YE[j], cg)
+        KI[j] = k
+        F3[0, j] = fx
+        F3[1, j] = fy
+        F3[2, j] = fz
+    s1 = np.int32(lut.shape[2])
+    s0 = np.int32(lut.shape[1]) * s1
+    for j in range(n):
+        k = KI[j]
+        T8[0, j] = load_i32(lut, k)
+        T8[1, j] = load_i32(lut, k + 1)
+        T8[2, j] = load_i32(lut, k + s1)
+        T8[3, j] = load_i32(lut, k + s1 + 1)
+        T8[4, j] = load_i32(lut, k + s0)
+        T8[5, j] = load_i32(lut, k + s0 + 1)
+        T8[6, j] = load_i32(lut, k + s0 + s1)
+        T8[7, j] = load_i32(lut, k + s0 + s1 + 1)
+    for j in range(n):
+        r = trilerp(
+            T8[0, j], T8[1, j], T8[2, j], T8[3, j], T8[4, j], T8[5, j], T8[6, j], T8[7, j],
+            F3[0, j], F3[1, j], F3[2, j],
+        )  # fmt: skip
+        out[j] = irradiance * r
 
 
 @numba.njit(cache=True, fastmath=True, error_model="numpy")
@@ -209,14 +211,20 @@ def _shade_terrain(
 
     Row by row in short passes over the row's terrain pixels (directions and positions,
     surface texture, normals, one pass per light, lightmap, cull): each pass is a
-    simple loop the compiler schedules well, where one long per-pixel body stalled."""
+    simple loop the compiler schedules well, where one long per-pixel body stalled.
+    Every table read (surface texture, regolith octaves, BRDF table, lightmap) is split
+    into an index pass (vector code), a loop of loads only and a blend pass (vector
+    code): without gathers a loop that loads through computed indices stays scalar."""
     nl = ldirs.shape[0]
     m_e = lut.shape[1] - 1
     n_oct = tpar.shape[0]
     tsize = np.float32(math.sqrt(ttop.size))
     tinv = np.float32(1.0) / tsize
+    sh = surf.shape[0]
+    sw = surf.shape[1]
     for row in numba.prange(height):
         col_of = np.empty(width, np.int64)
+        CF = np.empty(width)
         D0 = np.empty(width, np.float32)
         D1 = np.empty(width, np.float32)
         D2 = np.empty(width, np.float32)
@@ -238,13 +246,13 @@ def _shade_terrain(
         TA = np.empty(width, np.float32)
         TX = np.empty(width, np.float32)
         TY = np.empty(width, np.float32)
-        LC0 = np.empty(width, np.int64)
-        LC1 = np.empty(width, np.int64)
-        LC2 = np.empty(width, np.int64)
-        LR0 = np.empty(width, np.int64)
-        LR1 = np.empty(width, np.int64)
-        LR2 = np.empty(width, np.int64)
+        KI = np.empty(width, np.int32)
+        K2 = np.empty((2, width), np.int32)
+        F3 = np.empty((3, width), np.float32)
+        T8 = np.empty((12, width), np.float32)
+        P2 = np.empty((2, width), np.int32)
         LO = np.empty(width, np.uint8)
+        CU = np.zeros(width, np.uint8)
         base = row * width
         n = 0
         for col in range(width):
@@ -257,22 +265,46 @@ def _shade_terrain(
             depth_out[i] = np.inf
             if t[i] < np.inf and skip[i] == 0:
                 col_of[n] = col
+                CF[n] = col
+                TT[n] = t[i]
                 n += 1
         for j in range(n):  # directions and hit points
-            col = col_of[j]
-            d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, col)
-            ti = t[base + col]
-            TT[j] = ti
+            d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, CF[j])
+            ti = TT[j]
             D0[j] = d0
             D1[j] = d1
             D2[j] = d2
             X[j] = cam[0] + ti * d0
             Y[j] = cam[1] + ti * d1
             Z[j] = cam[2] + ti * d2
-        for j in range(n):  # normal map and albedo
-            nx, ny, alb = _tex3(surf, spar, X[j], Y[j])
-            NX[j] = nx
-            NY[j] = ny
+        # normal map and albedo: cells, the twelve reads, the bilinear blend
+        for j in range(n):
+            k, dc, dr, fc, fr = _surface_cell(sh, sw, spar, X[j], Y[j])
+            KI[j] = k
+            K2[0, j] = dc
+            K2[1, j] = dr
+            F3[0, j] = fc
+            F3[1, j] = fr
+        for j in range(n):
+            k = KI[j]
+            dc = K2[0, j]
+            dr = K2[1, j]
+            for c in range(3):
+                T8[c, j] = load_i32(surf, k + c)
+                T8[3 + c, j] = load_i32(surf, k + dc + c)
+                T8[6 + c, j] = load_i32(surf, k + dr + c)
+                T8[9 + c, j] = load_i32(surf, k + dr + dc + c)
+        one = np.float32(1.0)
+        for j in range(n):
+            fc = F3[0, j]
+            fr = F3[1, j]
+            w00 = (one - fr) * (one - fc)
+            w01 = (one - fr) * fc
+            w10 = fr * (one - fc)
+            w11 = fr * fc
+            NX[j] = w00 * T8[0, j] + w01 * T8[3, j] + w10 * T8[6, j] + w11 * T8[9, j]
+            NY[j] = w00 * T8[1, j] + w01 * T8[4, j] + w10 * T8[7, j] + w11 * T8[10, j]
+            alb = w00 * T8[2, j] + w01 * T8[5, j] + w10 * T8[8, j] + w11 * T8[11, j]
             AF[j] = alb * np.float32(afac_scale)
         if use_bump:
             for j in range(n):
@@ -286,7 +318,6 @@ def _shade_terrain(
                     NX[j] = bx * inv
                     NY[j] = by * inv
         if use_tex and n > 0:  # sub-cell regolith texture (render/regolith.py)
-            one = np.float32(1.0)
             for j in range(n):  # 1 / footprint = sqrt(cos_e) / (distance x pixel angle)
                 nx = NX[j]
                 ny = NY[j]
@@ -314,8 +345,17 @@ def _shade_terrain(
                 wa = np.float32(tpar[k, P_ALB])
                 ws = np.float32(tpar[k, P_SLOPE])
                 for j in range(n):
+                    kk, du, dv = octave_cell(tsize, tinv, cs, ss, ou, ov, XW[j], YW[j])
+                    KI[j] = kk
+                    F3[0, j] = du
+                    F3[1, j] = dv
+                for j in range(n):
+                    kk = KI[j]
+                    P2[0, j] = load_i32(ttop, kk)
+                    P2[1, j] = load_i32(tbot, kk)
+                for j in range(n):
                     w = octave_weight(lamf, FT[j])
-                    a, gu, gv = sample_octave(ttop, tbot, tsize, tinv, cs, ss, ou, ov, XW[j], YW[j])
+                    a, gu, gv = octave_blend(P2[0, j], P2[1, j], F3[0, j], F3[1, j])
                     wsj = w * ws
                     TA[j] += (w * wa) * a
                     TX[j] += wsj * (c * gu + sn * gv)
@@ -331,7 +371,6 @@ def _shade_terrain(
         for j in range(n):  # nz and the emission axis of the table
             nx = NX[j]
             ny = NY[j]
-            one = np.float32(1.0)
             nz = np.float32(math.sqrt(min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)))
             NZ[j] = nz
             YE[j] = lut_axis_f32(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(m_e))
@@ -342,7 +381,7 @@ def _shade_terrain(
             e = np.float32(lirr[k])
             # one call site for all lights: LLVM vectorized only one of two inlined
             # copies, and the other ran scalar (3.5x slower per light, measured)
-            _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, TMP)
+            _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, TMP, KI, F3, T8)
             if k == sun_light:
                 for j in range(n):
                     SUN[j] = TMP[j]
@@ -350,10 +389,11 @@ def _shade_terrain(
                 for j in range(n):
                     OTH[j] += TMP[j]
         if sun_light >= 0 and use_lm and soft_lm:
-            # quadratic B-spline of the lightmap (render/soft_shadow.py) in two passes,
-            # cells and weights, then the nine taps (one loop: it vectorizes)
+            # quadratic B-spline of the lightmap (render/soft_shadow.py): cells and
+            # weights, the nine reads, the taps
             lh = lma.shape[0]
             lw = lma.shape[1]
+            half = np.float32(0.5)
             for j in range(n):
                 col = (X[j] - lpar[2]) * lpar[0] - 0.5
                 row_ = (lpar[3] - Y[j]) * lpar[1] - 0.5
@@ -367,15 +407,16 @@ def _shade_terrain(
                 fr = np.floor(row_ + 0.5)
                 tc = np.float32(col - fc)
                 tr = np.float32(row_ - fr)
-                ic = min(np.int64(fc), lw - 1)
-                ir = min(np.int64(fr), lh - 1)
-                LC0[j] = max(ic - 1, 0)
-                LC1[j] = ic
-                LC2[j] = min(ic + 1, lw - 1)
-                LR0[j] = max(ir - 1, 0) * lw
-                LR1[j] = ir * lw
-                LR2[j] = min(ir + 1, lh - 1) * lw
-                half = np.float32(0.5)
+                # fc, fr >= 0 (col, row >= -0.5): int32 truncation is int()
+                ic = min(np.int32(fc), np.int32(lw - 1))
+                ir = min(np.int32(fr), np.int32(lh - 1))
+                lw32 = np.int32(lw)
+                k = ir * lw32 + ic
+                KI[j] = k
+                K2[0, j] = ic - max(ic - np.int32(1), np.int32(0))  # to the left column
+                K2[1, j] = min(ic + np.int32(1), np.int32(lw - 1)) - ic  # to the right
+                P2[0, j] = (ir - max(ir - np.int32(1), np.int32(0))) * lw32  # up a row
+                P2[1, j] = (min(ir + np.int32(1), np.int32(lh - 1)) - ir) * lw32  # down
                 TA[j] = half * (half - tc) * (half - tc)
                 TX[j] = np.float32(0.75) - tc * tc
                 TY[j] = half * (half + tc) * (half + tc)
@@ -383,36 +424,29 @@ def _shade_terrain(
                 XW[j] = np.float32(0.75) - tr * tr
                 YW[j] = half * (half + tr) * (half + tr)
             for j in range(n):
-                r0 = LR0[j]
-                r1 = LR1[j]
-                r2 = LR2[j]
-                c0 = LC0[j]
-                c1 = LC1[j]
-                c2 = LC2[j]
-                f = (
-                    FT[j]
-                    * (
-                        TA[j] * load_i32(lma, r0 + c0)
-                        + TX[j] * load_i32(lma, r0 + c1)
-                        + TY[j] * load_i32(lma, r0 + c2)
-                    )
-                    + XW[j]
-                    * (
-                        TA[j] * load_i32(lma, r1 + c0)
-                        + TX[j] * load_i32(lma, r1 + c1)
-                        + TY[j] * load_i32(lma, r1 + c2)
-                    )
-                    + YW[j]
-                    * (
-                        TA[j] * load_i32(lma, r2 + c0)
-                        + TX[j] * load_i32(lma, r2 + c1)
-                        + TY[j] * load_i32(lma, r2 + c2)
-                    )
-                )
-                TMP[j] = min(max(f, np.float32(0.0)), np.float32(1.0))
+                k = KI[j]
+                cl = K2[0, j]
+                cr = K2[1, j]
+                r0 = k - P2[0, j]
+                r2 = k + P2[1, j]
+                T8[0, j] = load_i32(lma, r0 - cl)
+                T8[1, j] = load_i32(lma, r0)
+                T8[2, j] = load_i32(lma, r0 + cr)
+                T8[3, j] = load_i32(lma, k - cl)
+                T8[4, j] = load_i32(lma, k)
+                T8[5, j] = load_i32(lma, k + cr)
+                T8[6, j] = load_i32(lma, r2 - cl)
+                T8[7, j] = load_i32(lma, r2)
+                T8[8, j] = load_i32(lma, r2 + cr)
             lout = np.float32(lpar[5])
             for j in range(n):
-                SUN[j] *= TMP[j] + np.float32(LO[j]) * (lout - TMP[j])
+                f = (
+                    FT[j] * (TA[j] * T8[0, j] + TX[j] * T8[1, j] + TY[j] * T8[2, j])
+                    + XW[j] * (TA[j] * T8[3, j] + TX[j] * T8[4, j] + TY[j] * T8[5, j])
+                    + YW[j] * (TA[j] * T8[6, j] + TX[j] * T8[7, j] + TY[j] * T8[8, j])
+                )
+                f = min(max(f, np.float32(0.0)), np.float32(1.0))
+                SUN[j] *= f + np.float32(LO[j]) * (lout - f)
         elif sun_light >= 0 and use_lm:
             for j in range(n):
                 SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
@@ -430,23 +464,27 @@ def _shade_terrain(
                 tp = -(qx * lx + qy * ly + qz * lz)
                 qq = qx * qx + qy * qy + qz * qz
                 reach = (max(tp, 0.0) + rad) * sphere[5] + rad + sphere[6]
-                if (
-                    SUN[j] > 0.0
-                    and tp > -rad - sphere[6]
-                    and qq - tp * tp <= reach * reach + 1e-5 * qq + 1e-6
-                ):
-                    cand_out[base + col_of[j]] = 1
-        for j in range(n):
-            i = base + col_of[j]
+                CU[j] = np.uint8(
+                    (SUN[j] > 0.0)
+                    & (tp > -rad - sphere[6])
+                    & (qq - tp * tp <= reach * reach + 1e-5 * qq + 1e-6)
+                )
+        for j in range(n):  # outputs (vector code), then stored at their columns
             sun_i = np.float32(SUN[j] * AF[j] * math.pi)
             other_i = np.float32(OTH[j] * AF[j] * math.pi)
-            sun_out[i] = sun_i
-            other_out[i] = other_i
-            rad_out[i] = sun_i + other_i
-            label_out[i] = 1
-            xc = (col_of[j] - cx) / fx
+            SUN[j] = sun_i
+            OTH[j] = other_i
+            xc = (CF[j] - cx) / fx
             yc = (row - cy) / fy
-            depth_out[i] = t[i] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
+            TT[j] = TT[j] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
+        for j in range(n):
+            i = base + col_of[j]
+            sun_out[i] = SUN[j]
+            other_out[i] = OTH[j]
+            rad_out[i] = SUN[j] + OTH[j]
+            label_out[i] = 1
+            depth_out[i] = TT[j]
+            cand_out[i] = CU[j]
 
 
 def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.0):

@@ -26,9 +26,11 @@ __all__ = [
     "ReflectanceLUT",
     "lut_axis",
     "lut_axis_f32",
+    "lut_cell_f32",
     "lut_reflectance",
     "lut_reflectance_at",
     "lut_reflectance_at_f32",
+    "trilerp",
 ]
 
 
@@ -39,18 +41,29 @@ def lut_axis(c, n):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def _trilinear(table, i0, j0, k0, fx, fy, fz):
-    """Trilinear blend of the cell at (i0, j0, k0) with fractions fx, fy, fz (the
-    arithmetic is in the fractions' float type)."""
-    c00 = table[i0, j0, k0] + fz * (table[i0, j0, k0 + 1] - table[i0, j0, k0])
-    c01 = table[i0, j0 + 1, k0] + fz * (table[i0, j0 + 1, k0 + 1] - table[i0, j0 + 1, k0])
-    c10 = table[i0 + 1, j0, k0] + fz * (table[i0 + 1, j0, k0 + 1] - table[i0 + 1, j0, k0])
-    c11 = table[i0 + 1, j0 + 1, k0] + fz * (
-        table[i0 + 1, j0 + 1, k0 + 1] - table[i0 + 1, j0 + 1, k0]
-    )
+def trilerp(t000, t001, t010, t011, t100, t101, t110, t111, fx, fy, fz):
+    """Trilinear blend of a cell's corners ``t[di][dj][dk]`` with fractions fx, fy, fz
+    (k first, then j, then i; the arithmetic is in the fractions' float type)."""
+    c00 = t000 + fz * (t001 - t000)
+    c01 = t010 + fz * (t011 - t010)
+    c10 = t100 + fz * (t101 - t100)
+    c11 = t110 + fz * (t111 - t110)
     c0 = c00 + fy * (c01 - c00)
     c1 = c10 + fy * (c11 - c10)
     return c0 + fx * (c1 - c0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def _trilinear(table, i0, j0, k0, fx, fy, fz):
+    """Trilinear blend of the cell at (i0, j0, k0) with fractions fx, fy, fz (the
+    arithmetic is in the fractions' float type)."""
+    return trilerp(
+        table[i0, j0, k0], table[i0, j0, k0 + 1],
+        table[i0, j0 + 1, k0], table[i0, j0 + 1, k0 + 1],
+        table[i0 + 1, j0, k0], table[i0 + 1, j0, k0 + 1],
+        table[i0 + 1, j0 + 1, k0], table[i0 + 1, j0 + 1, k0 + 1],
+        fx, fy, fz,
+    )  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -78,10 +91,11 @@ def lut_axis_f32(c, n):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def lut_reflectance_at_f32(table, x, y, cg):
-    """:func:`lut_reflectance_at` in float32 arithmetic (``x``, ``y``, ``cg`` float32):
-    the form a compiled loop vectorizes eight pixels wide, table reads included (results
-    within ~1e-6 relative of the float64 form)."""
+def lut_cell_f32(table, x, y, cg):
+    """The cell of :func:`lut_reflectance_at_f32` without reading the table: ``(k, fx,
+    fy, fz)``, the flat int32 index of its (i0, j0, k0) corner in the C-contiguous table
+    and the float32 fractions (vector code; the caller reads the eight corners at ``k``,
+    ``k + 1``, ``k + n_g``, ... and blends them with :func:`trilerp`)."""
     ni = table.shape[0] - 1
     ne = table.shape[1] - 1
     ng = table.shape[2] - 1
@@ -89,13 +103,31 @@ def lut_reflectance_at_f32(table, x, y, cg):
     h = np.float32(0.5) * (one - cg)
     h = min(max(h, np.float32(0.0)), one)
     z = np.float32(math.sqrt(np.float32(math.sqrt(h)))) * np.float32(ng)
-    i0 = min(int(x), ni - 1)
-    j0 = min(int(y), ne - 1)
-    k0 = min(int(z), ng - 1)
+    # x, y, z >= 0: int32 truncation is int() (and vectorizes)
+    i0 = min(np.int32(x), np.int32(ni - 1))
+    j0 = min(np.int32(y), np.int32(ne - 1))
+    k0 = min(np.int32(z), np.int32(ng - 1))
     fx = x - np.float32(i0)
     fy = y - np.float32(j0)
     fz = z - np.float32(k0)
-    return _trilinear(table, i0, j0, k0, fx, fy, fz)
+    k = (i0 * np.int32(ne + 1) + j0) * np.int32(ng + 1) + k0
+    return k, fx, fy, fz
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def lut_reflectance_at_f32(table, x, y, cg):
+    """:func:`lut_reflectance_at` in float32 arithmetic (``x``, ``y``, ``cg`` float32;
+    results within ~1e-6 relative of the float64 form): :func:`lut_cell_f32`, then the
+    eight corners blended by :func:`trilerp`."""
+    k, fx, fy, fz = lut_cell_f32(table, x, y, cg)
+    s1 = np.int32(table.shape[2])
+    s0 = np.int32(table.shape[1]) * s1
+    f = table.reshape(table.size)
+    return trilerp(
+        f[k], f[k + 1], f[k + s1], f[k + s1 + 1],
+        f[k + s0], f[k + s0 + 1], f[k + s0 + s1], f[k + s0 + s1 + 1],
+        fx, fy, fz,
+    )  # fmt: skip
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")

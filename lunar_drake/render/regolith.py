@@ -65,6 +65,8 @@ __all__ = [
     "apply_texture",
     "build_texture",
     "inverse_footprint",
+    "octave_blend",
+    "octave_cell",
     "octave_weight",
     "sample_octave",
     "sample_texture",
@@ -356,33 +358,45 @@ def wrap_coordinates(x, period):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def sample_octave(top, bottom, size, inv_size, cs, ss, ou, ov, x, y):
-    """One octave at wrapped site coordinates (x, y) (float32, from
-    :func:`wrap_coordinates`): ``(albedo noise, dN/du, dN/dv)`` in table units (the
-    caller rotates the gradient with the octave's (cos, sin) and applies the weights).
-
-    ``size``, ``inv_size``: S and 1 / S (float32); ``cs, ss``: the rotation times texels
-    per metre; ``(ou, ov)`` the offset (texels). All float32, two loads."""
+def octave_cell(size, inv_size, cs, ss, ou, ov, x, y):
+    """The table cell of one octave at wrapped site coordinates (x, y): ``(k, du, dv)``,
+    the flat int32 texel index and the float32 fractions inside it (no table reads: the
+    fast engine runs this as vector code, then the two loads in a loop of their own)."""
     u = cs * x - ss * y + ou
     v = ss * x + cs * y + ov
     u = u - size * np.floor(u * inv_size)
     v = v - size * np.floor(v * inv_size)
     fu = np.floor(u)
     fv = np.floor(v)
-    k = np.int32(fv * size + fu)
-    du = u - fu
-    dv = v - fv
+    return np.int32(fv * size + fu), u - fu, v - fv
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def octave_blend(p, q, du, dv):
+    """``(albedo noise, dN/du, dN/dv)`` from a cell's two words ``p = top[k]``, ``q =
+    bottom[k]`` and the fractions of :func:`octave_cell` (float32, no table reads)."""
     one = np.float32(1.0)
     w00 = (one - dv) * (one - du)
     w01 = (one - dv) * du
     w10 = dv * (one - du)
     w11 = dv * du
-    p = load_i32(top, k)
-    q = load_i32(bottom, k)
     a = w00 * _a_lo(p) + w01 * _a_hi(p) + w10 * _a_lo(q) + w11 * _a_hi(q)
     gu = w00 * _gu_lo(p) + w01 * _gu_hi(p) + w10 * _gu_lo(q) + w11 * _gu_hi(q)
     gv = w00 * _gv_lo(p) + w01 * _gv_hi(p) + w10 * _gv_lo(q) + w11 * _gv_hi(q)
     return a, gu, gv
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def sample_octave(top, bottom, size, inv_size, cs, ss, ou, ov, x, y):
+    """One octave at wrapped site coordinates (x, y) (float32, from
+    :func:`wrap_coordinates`): ``(albedo noise, dN/du, dN/dv)`` in table units (the
+    caller rotates the gradient with the octave's (cos, sin) and applies the weights).
+
+    ``size``, ``inv_size``: S and 1 / S (float32); ``cs, ss``: the rotation times texels
+    per metre; ``(ou, ov)`` the offset (texels). All float32, two loads:
+    :func:`octave_cell` then :func:`octave_blend`."""
+    k, du, dv = octave_cell(size, inv_size, cs, ss, ou, ov, x, y)
+    return octave_blend(load_i32(top, k), load_i32(bottom, k), du, dv)
 
 
 @numba.njit(cache=True, error_model="numpy")
