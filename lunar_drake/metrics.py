@@ -274,12 +274,20 @@ def _perception(keyframes) -> dict:
     }
 
 
+def _ground_map(logs) -> dict:
+    """The ground's a-priori map as summaries report it: ``map_source`` (orbital, or truth:
+    the oracle) and the product's facts (:func:`lunar_drake.preflight.describe`)."""
+    m = logs.preflight.get("ground_map")
+    return {"map_source": m["map_source"], "map": m} if m else {"map_source": None}
+
+
 def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
     """The deterministic summary of a run (``summary.json``)."""
     tel = logs.telemetry
     summary = {
         "scenario": scenario.name,
         "random_seed": scenario.random_seed,
+        "site_seed": scenario.site.seed,
         "simulated_s": _r(logs.simulated_s),
         "stop_reason": logs.stop_reason,
         "diagram": "mission",
@@ -293,7 +301,8 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "hazards": hazards(scenario=scenario, site=site, logs=logs),
         "link": link_stats(logs),
         "modes": modes(logs),
-        "ground": ground(logs),
+        "ground": {**_ground_map(logs), **ground(logs)},
+        "flight": {"slip_calibration": logs.preflight.get("slip_calibration")},
         "telemetry_received": len(tel.seq),
         "images_received": len(logs.images_received),
         "images_bytes_received": int(sum(r[4] for r in logs.images_received)),

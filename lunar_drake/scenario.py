@@ -60,12 +60,17 @@ class SiteConfig:
         name: human-readable site name.
         latitude_deg, longitude_deg: site centre on the IAU Moon sphere (deg; east lon).
         epoch_utc: UTC of simulation time 0 (ISO 8601).
+        seed: the site's seed: terrain synthesis (craters, rocks, fractal detail), the
+            world model's seeded layers and the orbital map's noise -- everything that
+            exists before the mission. ``random_seed`` drives the run itself, so
+            replicates over noise share one site.
     """
 
     name: str = "near Mons Mouton (approximate)"
     latitude_deg: float = -85.4
     longitude_deg: float = 31.6
     epoch_utc: str = "2027-11-15T00:00:00"
+    seed: int = 0
 
 
 @dc.dataclass
@@ -419,7 +424,10 @@ class Scenario:
     Attributes:
         name: a label for the run (summaries carry it); the loader sets it to the named
             scenario's name when the file does not.
-        random_seed: the one seed of every random stream (DESIGN.md decision 6).
+        random_seed: the run's seed (DESIGN.md decision 6): sensor noise, link losses
+            and delays' jitter, IMU biases, instrument counts -- every random stream of
+            the mission. The site (terrain, world model, orbital map) has its own,
+            ``site.seed``: changing ``random_seed`` never moves the ground.
         simulation_duration: simulated time (s).
         science: the world model science instruments read (:mod:`lunar_drake.science`;
             built on demand for the site and the epoch, and cached).
@@ -477,6 +485,7 @@ def validate_scenario(s: Scenario) -> None:
     check_range("simulation_duration", s.simulation_duration, 0.0, 1.0e7, unit=" s")
     if not math.isfinite(s.simulation_duration):
         raise OutOfRangeError(f"simulation_duration = {s.simulation_duration!r} must be finite")
+    check_range("site.seed", s.site.seed, 0, 2**63 - 1)
     check_range("site.latitude_deg", s.site.latitude_deg, -90.0, 90.0, unit=" deg")
     check_range("site.longitude_deg", s.site.longitude_deg, -360.0, 360.0, unit=" deg")
     try:
@@ -526,6 +535,13 @@ def validate_scenario(s: Scenario) -> None:
     check_range("flight.telemetry_rate_hz", f.telemetry_rate_hz, 0.001, 100.0, unit=" Hz")
     _section("flight.gimbal", f.gimbal.validate)
     _section("flight.estimator", f.estimator.validate)
+    if f.estimator.slip_calibration:
+        from lunar_drake.dynamics.soil_io import load_soil
+
+        try:
+            load_soil(f.estimator.slip_calibration)
+        except ConfigError as exc:
+            raise ConfigError(f"flight.estimator.slip_calibration: {exc}") from None
     _section("flight.safety", f.safety.validate)
     _section("flight.images", f.images.validate)
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")

@@ -14,7 +14,8 @@ Python tag or an unknown key (at any depth) is a one-line
 :class:`~lunar_drake.errors.ConfigError` naming the file, the line and the full key
 (``rover.description.wheel_radius``). A value out of range after the merge is named
 with the file (or ``--scenario-text``) and line that wrote it last. Relative paths in
-``terrain.dem`` and ``lighting.extra_kernels`` are resolved against the scenario file's
+``terrain.dem``, ``lighting.extra_kernels`` and a soil file named by
+``flight.estimator.slip_calibration`` are resolved against the scenario file's
 directory, so the written ``scenario.yaml`` holds absolute paths.
 """
 
@@ -211,6 +212,9 @@ def _resolve_paths(s: Scenario, base: Path) -> None:
     s.lighting.extra_kernels = [
         k if Path(k).is_absolute() else str((base / k).resolve()) for k in s.lighting.extra_kernels
     ]
+    cal = s.flight.estimator.slip_calibration
+    if cal.endswith((".yaml", ".yml")) and not Path(cal).is_absolute():
+        s.flight.estimator.slip_calibration = str((base / cal).resolve())
 
 
 def load_scenario(

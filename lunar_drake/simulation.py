@@ -109,6 +109,9 @@ class SimulationLogs:
             (:class:`~lunar_drake.perception.ground_pipeline.KeyframeRecord`).
         ground_costmap: the ground's final costmap (a-priori + stereo hazards), or None
             without ground perception.
+        preflight: what the mission had before launch
+            (:func:`lunar_drake.preflight.describe`: the ground's map and its source, the
+            flight's slip calibration).
         frames_written: camera frames written to ``frames_dir``.
         wall: wall-clock timing (s; not deterministic).
     """
@@ -128,6 +131,7 @@ class SimulationLogs:
     science_received: list = dc.field(default_factory=list)
     keyframes: list = dc.field(default_factory=list)
     ground_costmap: object = None
+    preflight: dict = dc.field(default_factory=dict)
 
 
 StopCheck = Callable[[float, np.ndarray], "str | None"]
@@ -173,10 +177,13 @@ def simulate(
     from pydrake.systems.framework import DiagramBuilder, EventStatus
     from pydrake.systems.primitives import LogVectorOutput
 
+    from lunar_drake import preflight
     from lunar_drake.diagrams.mission import MakeMissionDiagram
 
     t0 = time.perf_counter()
-    mission = MakeMissionDiagram(scenario=scenario, site=site, meshcat=meshcat)
+    map_product = preflight.ground_map_product(scenario, site)
+    mission = MakeMissionDiagram(scenario=scenario, site=site, meshcat=meshcat,
+                                 map_product=map_product)  # fmt: skip
     builder = DiagramBuilder()
     builder.AddSystem(mission)
     period = scenario.logging.period_s
@@ -346,6 +353,7 @@ def simulate(
         science_received=science,
         keyframes=keyframes,
         ground_costmap=costmap,
+        preflight=preflight.describe(scenario, map_product=map_product),
         wall={
             "build_s": t_built - t0,
             "simulate_s": t_sim - t_built,

@@ -52,7 +52,7 @@ def synth_config_from_scenario(scenario: Scenario) -> SynthConfig:
         size_px=t.size_px,
         resolution_m=t.resolution_m,
         factor=t.factor,
-        seed=scenario.random_seed,
+        seed=scenario.site.seed,
         crater_sfd=sfd,
         min_crater_m=t.min_crater_m,
         max_crater_m=t.max_crater_m or None,

@@ -426,13 +426,19 @@ def test_telemetry_fields_carry_the_executor_status():
 # ------------------------------------------------------------------- short missions
 
 
+#: These missions test the link and the mode manager, not mapping: cameras off and the
+#: ground on the true map (the oracle).
+ORACLE_MAP = "{sensors: {camera: {enabled: false}}, ground: {map: {source: truth}}}"
+
+
 def _goto_mission(cache_text):
     from lunar_drake import metrics
-    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.scenario_files import apply_overrides, load_scenario
     from lunar_drake.simulation import simulate
     from lunar_drake.site import load_site
 
     scenario = load_scenario(scenario_name="goto", scenario_text=cache_text)
+    scenario = apply_overrides(scenario, ORACLE_MAP, source="the test's oracle map")
     site = load_site(scenario, progress=False)
     logs = simulate(scenario=scenario, site=site, progress=False)
     return logs, metrics.summarize(scenario=scenario, site=site, logs=logs)
@@ -487,10 +493,11 @@ def test_the_operator_api_drives_the_mission_between_advances(cache):
 
     from lunar_drake.diagrams.mission import MakeMissionDiagram, ground_operator
     from lunar_drake.errors import OutOfBoundsError, OutOfRangeError
-    from lunar_drake.scenario_files import load_scenario
+    from lunar_drake.scenario_files import apply_overrides, load_scenario
     from lunar_drake.site import load_site
 
     scenario = load_scenario(scenario_name="goto", scenario_text="{ground: {goals: []}}")
+    scenario = apply_overrides(scenario, ORACLE_MAP, source="the test's oracle map")
     scenario.ground.route = []
     site = load_site(scenario, progress=False)
     mission = MakeMissionDiagram(scenario=scenario, site=site)

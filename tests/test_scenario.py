@@ -26,6 +26,8 @@ KEPT_AT_DEFAULT = {
     "ground.perception.map.baseline_m": "ground.perception takes it from the rig's calibration",
     "ground.goals": "goals replace the route, which OneOfEverything exercises (the goto "
     "scenario and tests/test_goto.py drive to goals)",
+    "flight.estimator.slip_calibration": "it makes slip_vs_slope, which OneOfEverything "
+    "writes by hand (the default, skid and prospect scenarios calibrate)",
 }
 
 

@@ -18,8 +18,10 @@ centre must stay that far from hazards). Free cells cost ``1 + slope_weight (slo
 max_slope)^2 + roughness_weight (roughness / max_roughness)^2`` per metre; lethal ones
 ``inf``.
 
-:func:`orbital_dem` gives the map a mission would have from orbit: the DEM averaged over
-blocks of ``orbital_resolution_m`` (rocks vanish, craters stay) plus seeded noise.
+The ground's a-priori map is a pre-flight product
+(:mod:`lunar_drake.autonomy.map_product`): by default ``orbital``, the terrain without the
+rocks an orbital camera cannot resolve, averaged over blocks of ``orbital_resolution_m``
+(craters stay) plus seeded noise; ``truth`` (the site DEM) is an oracle.
 An orbital map's metre-scale slope hides rover-scale ones: on the default site, 1 m
 cells at 10-12 deg are 51 % lethal at the planning grid, at 12-14 deg 73 %
 (``benchmarks/orbital_trust.py``). So orbital cells steeper than
@@ -36,8 +38,8 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from lunar_drake import rng
-from lunar_drake.errors import ConfigError, OutOfBoundsError, OutOfRangeError, check_range
+from lunar_drake.autonomy.map_product import MapProduct, make_map_product, orbital_dem
+from lunar_drake.errors import ConfigError, check_range
 
 
 @dc.dataclass
@@ -85,22 +87,26 @@ MAP_SOURCES = ("truth", "orbital")
 
 @dc.dataclass
 class MapConfig:
-    """The ground's a-priori map.
+    """The ground's a-priori map (:mod:`lunar_drake.autonomy.map_product`).
 
     Attributes:
-        source: ``truth`` (the site DEM, rocks included: an oracle for testing control
-            and the link) or ``orbital`` (the DEM averaged to ``orbital_resolution_m``
-            plus seeded noise: rocks vanish, craters stay, as in orbital data).
+        source: ``orbital`` (default: the terrain without the rocks narrower than
+            ``resolved_rock_m``, averaged to ``orbital_resolution_m``, plus seeded noise:
+            what an orbital camera gives) or ``truth`` (the site DEM, every rock in it:
+            an oracle for testing control and the link; runs say so).
         orbital_resolution_m: orbital DEM pixel (m). orbital_noise_m: its noise (m).
+        resolved_rock_m: the narrowest rock the orbital camera resolves (m; equivalent
+            diameter); 0 = two orbital pixels. Narrower rocks are not in the product.
         margin_m: map margin around the start and the goal (m).
         confirm_slope_deg: orbital cells steeper than this (deg) are lethal until stereo
             has seen them (module docstring); 0: trust the orbital map; not used with
             ``truth``.
     """
 
-    source: str = "truth"
+    source: str = "orbital"
     orbital_resolution_m: float = 1.0
     orbital_noise_m: float = 0.05
+    resolved_rock_m: float = 0.0
     margin_m: float = 20.0
     confirm_slope_deg: float = 11.0
 
@@ -109,6 +115,7 @@ class MapConfig:
             raise ConfigError(f"source = {self.source!r} is unknown; choose one of {MAP_SOURCES}")
         check_range("orbital_resolution_m", self.orbital_resolution_m, 0.01, 1e4, unit=" m")
         check_range("orbital_noise_m", self.orbital_noise_m, 0.0, 100.0, unit=" m")
+        check_range("resolved_rock_m", self.resolved_rock_m, 0.0, 1e4, unit=" m")
         check_range("margin_m", self.margin_m, 0.0, 1e5, unit=" m")
         check_range("confirm_slope_deg", self.confirm_slope_deg, 0.0, 90.0, unit=" deg")
 
@@ -186,11 +193,6 @@ class Costmap:
 def _block_max(a: np.ndarray, k: int) -> np.ndarray:
     r, c = (a.shape[0] // k) * k, (a.shape[1] // k) * k
     return a[:r, :c].reshape(r // k, k, c // k, k).max(axis=(1, 3))
-
-
-def _block_mean(a: np.ndarray, k: int) -> np.ndarray:
-    r, c = (a.shape[0] // k) * k, (a.shape[1] // k) * k
-    return a[:r, :c].reshape(r // k, k, c // k, k).mean(axis=(1, 3))
 
 
 def hazard_layers(z, *, resolution_m: float, baseline_m: float, step_window_m: float):
@@ -288,67 +290,39 @@ def costmap_from_layers(*, slope_deg, step_m, roughness_m, lethal_raw, resolutio
     )
 
 
-def orbital_dem(z, *, resolution_m: float, orbital_resolution_m: float, noise_m: float,
-                seed: int) -> tuple:  # fmt: skip
-    """(DEM, pixel size): ``z`` averaged over blocks of ``orbital_resolution_m`` (an
-    orbital DEM: rocks vanish, craters stay) plus seeded white noise of ``noise_m`` (m,
-    1 sigma)."""
-    check_range("orbital_resolution_m", orbital_resolution_m, resolution_m, 1e4, unit=" m")
-    check_range("noise_m", noise_m, 0.0, 100.0, unit=" m")
-    k = max(1, round(orbital_resolution_m / resolution_m))
-    coarse = _block_mean(np.asarray(z, np.float64), k)
-    g = rng.generator(seed, "ground/orbital_map")
-    return coarse + g.normal(0.0, noise_m, coarse.shape), resolution_m * k
+def map_dem_for_site(*, heightfield, points_xy, map_config: MapConfig, seed: int,
+                     rock_mask=None) -> tuple:  # fmt: skip
+    """(z, pixel size, x0_m, y1_m) of :func:`~lunar_drake.autonomy.map_product.
+    make_map_product` (the ground's a-priori DEM around ``points_xy``)."""
+    p = make_map_product(heightfield=heightfield, points_xy=points_xy, map_config=map_config,
+                         seed=seed, rock_mask=rock_mask)  # fmt: skip
+    return p.z, p.resolution_m, p.x0_m, p.y1_m
 
 
-def map_dem_for_site(*, heightfield, points_xy, map_config: MapConfig, seed: int) -> tuple:
-    """(z, pixel size, x0_m, y1_m): the ground's a-priori DEM around ``points_xy``
-    (start, goals; site m): the raster window covering them plus
-    ``map_config.margin_m``, as ``map_config.source`` says (truth or orbital)."""
-    map_config.validate()
-    pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
-    if not np.isfinite(pts).all():
-        raise OutOfRangeError(f"points_xy = {pts.tolist()!r} m must be finite site coordinates")
-    b = heightfield.bounds
-    res = heightfield.resolution_m
-    lo = pts.min(axis=0) - map_config.margin_m
-    hi = pts.max(axis=0) + map_config.margin_m
-    col0 = max(0, math.floor((lo[0] - b.left) / res))
-    col1 = min(heightfield.shape[1], math.ceil((hi[0] - b.left) / res))
-    row0 = max(0, math.floor((b.top - hi[1]) / res))
-    row1 = min(heightfield.shape[0], math.ceil((b.top - lo[1]) / res))
-    if row1 - row0 < 2 or col1 - col0 < 2:
-        raise OutOfBoundsError(
-            f"points {pts.tolist()!r} m (margin {map_config.margin_m:g} m) lie off the site: "
-            f"x in [{b.left:g}, {b.right:g}], y in [{b.bottom:g}, {b.top:g}] m"
-        )
-    z = np.asarray(heightfield.read_window(row0, col0, row1 - row0, col1 - col0), np.float64)
-    x0 = b.left + col0 * res
-    y1 = b.top - row0 * res
-    if map_config.source == "orbital":
-        z, res = orbital_dem(
-            z, resolution_m=res, orbital_resolution_m=map_config.orbital_resolution_m,
-            noise_m=map_config.orbital_noise_m, seed=seed,
-        )  # fmt: skip
-    return z, res, x0, y1
-
-
-def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
-                     map_config: MapConfig, seed: int) -> Costmap:  # fmt: skip
-    """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
-    ``heightfield``: the DEM of :func:`map_dem_for_site`, through :func:`build_costmap`;
-    an orbital map's cells steeper than ``map_config.confirm_slope_deg`` unconfirmed."""
-    z, res, x0, y1 = map_dem_for_site(heightfield=heightfield, points_xy=points_xy,
-                                      map_config=map_config, seed=seed)  # fmt: skip
-    cm = build_costmap(z, resolution_m=res, x0_m=x0, y1_m=y1, rover=rover, config=hazards)
-    if map_config.source != "orbital" or map_config.confirm_slope_deg <= 0.0:
+def costmap_of_product(product: MapProduct, *, rover: "RoverEnvelope",
+                       hazards: HazardConfig) -> Costmap:  # fmt: skip
+    """The costmap of a map product, through :func:`build_costmap`; an orbital product's
+    cells steeper than its ``confirm_slope_deg`` unconfirmed (module docstring)."""
+    cm = build_costmap(product.z, resolution_m=product.resolution_m, x0_m=product.x0_m,
+                       y1_m=product.y1_m, rover=rover, config=hazards)  # fmt: skip
+    if product.source != "orbital" or product.confirm_slope_deg <= 0.0:
         return cm
-    unconfirmed = (cm.slope_deg > map_config.confirm_slope_deg) & ~cm.lethal_raw
+    unconfirmed = (cm.slope_deg > product.confirm_slope_deg) & ~cm.lethal_raw
     return costmap_from_layers(
         slope_deg=cm.slope_deg, step_m=cm.step_m, roughness_m=cm.roughness_m,
         lethal_raw=cm.lethal_raw, resolution_m=cm.resolution_m, x0_m=cm.x0_m, y1_m=cm.y1_m,
         rover=rover, config=hazards, unconfirmed=unconfirmed,
     )  # fmt: skip
+
+
+def costmap_for_site(*, heightfield, points_xy, rover: "RoverEnvelope", hazards: HazardConfig,
+                     map_config: MapConfig, seed: int, rock_mask=None) -> Costmap:  # fmt: skip
+    """The ground's costmap around ``points_xy`` (start, goals; site m) from the site's
+    ``heightfield``: :func:`costmap_of_product` of :func:`~lunar_drake.autonomy.
+    map_product.make_map_product`."""
+    product = make_map_product(heightfield=heightfield, points_xy=points_xy,
+                               map_config=map_config, seed=seed, rock_mask=rock_mask)  # fmt: skip
+    return costmap_of_product(product, rover=rover, hazards=hazards)
 
 
 __all__ = [
@@ -360,6 +334,7 @@ __all__ = [
     "build_costmap",
     "costmap_for_site",
     "costmap_from_layers",
+    "costmap_of_product",
     "hazard_layers",
     "hazard_limits",
     "map_dem_for_site",

@@ -79,6 +79,10 @@ class EstimatorConfig:
             table(0)`` to its slip state (whose prior stays ``slip_prior``: the level
             slip on this terrain, roughness included); the climb comes from the
             estimated attitude; interpolated linearly, held at the ends.
+        slip_calibration: the pre-flight slip calibration (a soil preset such as
+            ``grc1`` or a soil YAML file): when given, ``slip_prior`` and
+            ``slip_vs_slope`` come from it (:mod:`lunar_drake.autonomy.slip_calibration`;
+            ``slip_vs_slope`` must then be empty); empty: use them as written.
         slip_random_walk_per_sqrt_m: slip random walk (1/sqrt(m) of driving).
         side_slip_sigma0, side_slip_random_walk_per_sqrt_m: the same for the side slip
             (prior mean 0).
@@ -106,6 +110,7 @@ class EstimatorConfig:
     slip_prior: float = 0.1
     slip_sigma0: float = 0.08
     slip_vs_slope: list[list[float]] = dc.field(default_factory=list)
+    slip_calibration: str = ""
     slip_random_walk_per_sqrt_m: float = 0.01
     side_slip_sigma0: float = 0.02
     side_slip_random_walk_per_sqrt_m: float = 0.005
@@ -144,6 +149,11 @@ class EstimatorConfig:
             for k, (d, v) in enumerate(table):
                 check_range(f"slip_vs_slope[{k}] slope", d, -60.0, 60.0, unit=" deg")
                 check_range(f"slip_vs_slope[{k}] slip", v, -1.0, 1.0, hi_open=True)
+        if self.slip_calibration and table:
+            raise ConfigError(
+                f"slip_calibration = {self.slip_calibration!r} and slip_vs_slope = {table!r} "
+                "are both given; the calibration makes the table: give one of them"
+            )
         check_range("slip_random_walk_per_sqrt_m", self.slip_random_walk_per_sqrt_m, 0.0, 1.0)
         check_range("side_slip_sigma0", self.side_slip_sigma0, 0.0, 1.0)
         check_range("side_slip_random_walk_per_sqrt_m", self.side_slip_random_walk_per_sqrt_m,

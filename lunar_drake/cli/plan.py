@@ -20,21 +20,23 @@ def run_plan(*, scenario, site, goal_xy, start_xy=None, out_dir) -> dict:
     the waypoints the rover follows; ``unconfirmed_fraction``: the orbital map's steep
     cells, lethal until stereo sees them); returns the plan.json dict. Raises ``OutOfBoundsError`` /
     ``PlanningError`` (one line) for goals off the map, in a hazard or unreachable."""
+    import copy
+
     from matplotlib.figure import Figure
 
-    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
+    from lunar_drake.autonomy.costmap import RoverEnvelope
     from lunar_drake.autonomy.planner import plan_path, plot_plan
+    from lunar_drake.diagrams.ground import ground_costmap
+    from lunar_drake.preflight import ground_map_product
+    from lunar_drake.scenario import Goal
 
     start = (scenario.rover.spawn_x_m, scenario.rover.spawn_y_m) if start_xy is None else start_xy
+    # The mission's own map product (whole site, or the window round start and goal).
+    s = copy.deepcopy(scenario)
+    s.rover.spawn_x_m, s.rover.spawn_y_m = float(start[0]), float(start[1])
+    s.ground.goals, s.ground.actions = [Goal(x_m=goal_xy[0], y_m=goal_xy[1])], []
+    cm = ground_costmap(s, ground_map_product(s, site))
     rover = RoverEnvelope.of(scenario.rover.description)
-    cm = costmap_for_site(
-        heightfield=site.heightfield,
-        points_xy=[start, goal_xy],
-        rover=rover,
-        hazards=scenario.ground.hazards,
-        map_config=scenario.ground.map,
-        seed=scenario.random_seed,
-    )
     path = plan_path(costmap=cm, start_xy=start, goal_xy=goal_xy)
     out = ensure_output_dir(out_dir, what="--out directory")
     lines = ["x_m,y_m"] + [f"{x:.4f},{y:.4f}" for x, y in path.waypoints_xy]

@@ -93,6 +93,17 @@ def follower_params(description) -> FollowerParams:
     return FollowerParams(crab_gain_per_s=0.0 if description.steering == "skid" else 0.3)
 
 
+def flight_estimator_config(scenario: Scenario):
+    """The on-board EKF's config: ``flight.estimator`` with its slip table and level
+    prior from the pre-flight slip calibration when it names one
+    (:func:`~lunar_drake.autonomy.slip_calibration.calibrated_estimator`)."""
+    from lunar_drake.autonomy.slip_calibration import calibrated_estimator
+
+    config, _ = calibrated_estimator(scenario.flight.estimator,
+                                     description=scenario.rover.description)  # fmt: skip
+    return config
+
+
 def MakeFlightDiagram(*, scenario: Scenario):
     """Builds the flight-software diagram (named ``flight``): the command executor (runs
     the uplinked commands, keeps the mode, safes on a bumper trip or the loss of the
@@ -124,7 +135,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
         "flight.estimator",
         StateEstimator(
             description=d,
-            config=f.estimator,
+            config=flight_estimator_config(scenario),
             start_xy_m=(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m),
             start_yaw_rad=math.radians(scenario.rover.spawn_yaw_deg),
         ),

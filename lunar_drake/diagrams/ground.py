@@ -41,22 +41,21 @@ def route_commands(scenario: Scenario) -> list[DriveCommand]:
     ]
 
 
-def goal_commands(scenario: Scenario, site, *, costmap=None) -> list[GotoCommand]:
+def goal_commands(scenario: Scenario, *, costmap) -> list[GotoCommand]:
     """Plans from the spawn point through ``ground.goals`` in order on the ground's
-    a-priori map (``costmap``, default :func:`ground_costmap`;
-    :mod:`lunar_drake.autonomy.planner`) and returns one goto command per goal (what the
-    ground sends when the estimate is perfect). Raises OutOfBoundsError / PlanningError
-    naming the goal for a goal off the map, inside a hazard or unreachable."""
+    a-priori ``costmap`` (:func:`ground_costmap`; :mod:`lunar_drake.autonomy.planner`)
+    and returns one goto command per goal (what the ground sends when the estimate is
+    perfect). Raises OutOfBoundsError / PlanningError naming the goal for a goal off the
+    map, inside a hazard or unreachable."""
     from lunar_drake.autonomy.planner import plan_path
 
     g = scenario.ground
-    cm = ground_costmap(scenario, site) if costmap is None else costmap
     start = (scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)
     out = []
     for k, p in enumerate(g.goals):
         goal = (p.x_m, p.y_m)
         try:
-            path = plan_path(costmap=cm, start_xy=start, goal_xy=goal)
+            path = plan_path(costmap=costmap, start_xy=start, goal_xy=goal)
         except (PlanningError, OutOfBoundsError) as exc:
             raise type(exc)(f"ground.goals[{k}]: {exc}") from None
         timeout = 3.0 * path.length_m / g.drive_speed_mps + 60.0
@@ -72,46 +71,22 @@ def goal_commands(scenario: Scenario, site, *, costmap=None) -> list[GotoCommand
     return out
 
 
-def _map_points(scenario: Scenario, site) -> list:
-    g = scenario.ground
-    hf = site.heightfield
-    if hf.shape[0] * hf.shape[1] <= 4096**2:
-        b = hf.bounds
-        return [(b.left, b.bottom), (b.right, b.top)]
-    points = [(scenario.rover.spawn_x_m, scenario.rover.spawn_y_m)]
-    points += [(p.x_m, p.y_m) for p in g.goals]
-    points += [(a.x_m, a.y_m) for a in g.actions if a.action == "goal"]
-    return points
-
-
-def ground_map_dem(scenario: Scenario, site):
+def ground_map_dem(map_product):
     """The ground's a-priori DEM (:class:`~lunar_drake.perception.elevation_map.PriorDem`)
-    over the area of :func:`ground_costmap` (``ground.map``: truth or orbital)."""
-    from lunar_drake.autonomy.costmap import map_dem_for_site
+    of its map product."""
     from lunar_drake.perception.elevation_map import PriorDem
 
-    z, res, x0, y1 = map_dem_for_site(
-        heightfield=site.heightfield, points_xy=_map_points(scenario, site),
-        map_config=scenario.ground.map, seed=scenario.random_seed,
-    )  # fmt: skip
-    return PriorDem(z=z, resolution_m=res, x0_m=x0, y1_m=y1)
+    p = map_product
+    return PriorDem(z=p.z, resolution_m=p.resolution_m, x0_m=p.x0_m, y1_m=p.y1_m)
 
 
-def ground_costmap(scenario: Scenario, site):
-    """The ground's costmap (``ground.map``, ``ground.hazards``): over the whole site
-    when it has at most 4096^2 pixels, else around the spawn point, the goals and the
-    scheduled goal actions plus ``ground.map.margin_m``."""
-    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_for_site
+def ground_costmap(scenario: Scenario, map_product):
+    """The ground's costmap of its map product (``ground.hazards``; an orbital map's
+    steep cells unconfirmed until stereo sees them)."""
+    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_of_product
 
-    g = scenario.ground
-    return costmap_for_site(
-        heightfield=site.heightfield,
-        points_xy=_map_points(scenario, site),
-        rover=RoverEnvelope.of(scenario.rover.description),
-        hazards=g.hazards,
-        map_config=g.map,
-        seed=scenario.random_seed,
-    )
+    return costmap_of_product(map_product, rover=RoverEnvelope.of(scenario.rover.description),
+                              hazards=scenario.ground.hazards)  # fmt: skip
 
 
 def operator_params(scenario: Scenario) -> OperatorParams:
@@ -195,33 +170,37 @@ def ground_perception(scenario: Scenario, *, costmap, prior_dem) -> GroundPercep
     )
 
 
-def MakeGroundDiagram(*, scenario: Scenario, site=None):
+def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
     """Builds the ground-software diagram (named ``ground``): the operator
     (:class:`~lunar_drake.systems.ground_operator.GroundOperator`: the route, or the
     goals driven one at a time with planning and replanning on the ground's map from
     the downlinked estimate, the scheduled ``ground.actions``, Python requests,
     heartbeats, the ground pose estimate) and the telemetry receiver (every packet the
-    downlink delivered, once, in order). ``site`` (its DEM is the ground's a-priori
-    map) is needed for goals; scenario goals the map cannot serve (off it, in a hazard,
-    unreachable from the previous one) are refused here, before the run."""
+    downlink delivered, once, in order).
+
+    ``map_product`` (:class:`~lunar_drake.autonomy.map_product.MapProduct`, made before
+    launch by :func:`lunar_drake.preflight.ground_map_product`) is the ground's a-priori
+    map, and all it knows of the terrain: the ground never sees the site. It is needed
+    for goals; scenario goals the map cannot serve (off it, in a hazard, unreachable
+    from the previous one) are refused here, before the run."""
     g = scenario.ground
     builder = DiagramBuilder()
     planner, in_map, prior_dem, preview = None, None, None, None
-    if site is not None:
-        costmap = ground_costmap(scenario, site)
+    if map_product is not None:
+        costmap = ground_costmap(scenario, map_product)
         planner = plan_waypoints(
             costmap, goal_free_radius_m=goal_shift_limit_m(operator_params(scenario))
         )
-        prior_dem = ground_map_dem(scenario, site)
+        prior_dem = ground_map_dem(map_product)
         preview = command_preview(scenario, prior_dem=prior_dem)
 
         def in_map(x, y):
             return costmap.inside(*costmap.cell_of(x, y))
 
     elif g.goals or any(a.action == "goal" for a in g.actions):
-        raise ValueError("ground.goals need the site (the ground's a-priori map)")
+        raise ValueError("ground.goals need the ground's a-priori map (map_product)")
     if g.goals:
-        goal_commands(scenario, site, costmap=costmap)  # refuse what the map cannot serve
+        goal_commands(scenario, costmap=costmap)  # refuse what the map cannot serve
     for k, a in enumerate(g.actions):
         if a.action == "goal" and not in_map(a.x_m, a.y_m):
             x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
@@ -232,7 +211,7 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
             )
 
     def no_map(start_xy, goal_xy):
-        raise PlanningError("the ground has no map (MakeGroundDiagram without a site)")
+        raise PlanningError("the ground has no map (MakeGroundDiagram without a map_product)")
 
     operator = builder.AddNamedSystem(
         "ground.operator",
@@ -262,7 +241,7 @@ def MakeGroundDiagram(*, scenario: Scenario, site=None):
         images = builder.AddNamedSystem("ground.images", ImageReceiver(rate_hz=g.rate_hz))
         builder.ExportInput(images.images_input, "downlink.images")
         builder.ExportOutput(images.frames_received_output, "ground.frames_received")
-        if g.perception.enabled and site is not None:
+        if g.perception.enabled and map_product is not None:
             perception = builder.AddNamedSystem(
                 "ground.perception",
                 ground_perception(scenario, costmap=costmap, prior_dem=prior_dem),

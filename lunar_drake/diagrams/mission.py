@@ -9,7 +9,10 @@ Wiring only::
 
 The flight diagram's inputs come only from plant sensor ports and the uplink; the ground
 diagram's only from the downlink; ``truth.*`` ports feed nothing inside the mission
-(``tests/test_seams.py`` proves each). Exported: every plant output (sensors, cameras,
+(``tests/test_seams.py`` proves each). What each is handed when it is built: the plant
+the site, the ground only the pre-flight map product (orbital by default; the true DEM
+only as a declared oracle), the flight only the scenario's rover description and its
+pre-flight slip calibration. Exported: every plant output (sensors, cameras,
 ``truth.*``), the flight's on-board records (``flight.*``), the ground's received
 telemetry (``ground.*``).
 """
@@ -29,20 +32,29 @@ from lunar_drake.diagrams.flight import (
 from lunar_drake.diagrams.ground import MakeGroundDiagram
 from lunar_drake.diagrams.plant import MakePlantDiagram
 from lunar_drake.ephemeris.sun_earth import SiteLocation
+from lunar_drake.preflight import ground_map_product
 from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.link import Link
 
 
-def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
+def MakeMissionDiagram(*, scenario: Scenario, site: SiteData, meshcat=None, map_product=None):
     """Builds the mission diagram (named ``mission``) with subsystems ``plant``,
-    ``flight``, ``ground``, ``uplink`` and ``downlink``."""
+    ``flight``, ``ground``, ``uplink`` and ``downlink``. The plant gets the site; the
+    ground only its pre-flight map product (``map_product``, default
+    :func:`lunar_drake.preflight.ground_map_product`); the flight its slip calibration
+    (:func:`lunar_drake.diagrams.flight.flight_estimator_config`)."""
     builder = DiagramBuilder()
     plant = builder.AddNamedSystem(
         "plant", MakePlantDiagram(scenario=scenario, site=site, meshcat=meshcat)
     )
     flight = builder.AddNamedSystem("flight", MakeFlightDiagram(scenario=scenario))
-    ground = builder.AddNamedSystem("ground", MakeGroundDiagram(scenario=scenario, site=site))
+    # The ground gets the pre-flight map product, never the site.
+    if map_product is None:
+        map_product = ground_map_product(scenario, site)
+    ground = builder.AddNamedSystem(
+        "ground", MakeGroundDiagram(scenario=scenario, map_product=map_product)
+    )
     light = None
     if scenario.comms.uplink.delay_s is None or scenario.comms.downlink.delay_s is None:
         light = light_time_s(
