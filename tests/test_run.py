@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from lunar_drake.cli import build_parser, main
+from lunar_drake.cli.run import run_estimate
 from lunar_drake.outputs import LOG_FILES
-from lunar_drake.scenario_files import apply_overrides
+from lunar_drake.scenario_files import apply_overrides, load_scenario
 
 RUN = ["run", "--no-meshcat", "--no-progress"]
 LOGS = [*LOG_FILES.values(), "telemetry.csv", "link.csv"]
@@ -66,6 +67,10 @@ def test_scenario_text_run_reproduces_and_frames_match(cache, tmp_path, capsys):
     assert main([*RUN, "--scenario", str(a / "scenario.yaml"), "--out", str(b)]) == 0
     _assert_same_run(a, b)
     frames = sorted((a / "frames").iterdir())
+    # The frame bytes announced before the run are the right order (an estimate).
+    s = load_scenario(filename=str(a / "scenario.yaml"))
+    estimate = run_estimate(s, meshcat=False)["frames_bytes"]
+    assert 0.5 < estimate / sum(f.stat().st_size for f in frames) < 2.0
     assert [f.name for f in frames][:2] == ["left_000000.png", "left_000000_preview.png"]
     for f in frames:
         assert f.read_bytes() == (b / "frames" / f.name).read_bytes(), f.name
@@ -172,7 +177,11 @@ def test_meshcat_listens_on_localhost_by_default(cache, tmp_path, capsys, extra,
         if c.status == psutil.CONN_LISTEN and c.laddr not in before
     ]
     assert listening and all(c.laddr.ip == ip for c in listening)
-    assert (out / "meshcat.html").stat().st_size > 10_000
+    size = (out / "meshcat.html").stat().st_size
+    assert size > 10_000
+    # The size announced before the run is the right order (an estimate).
+    s = load_scenario(scenario_name="small", scenario_text="{simulation_duration: 0.1}")
+    assert 0.5 < run_estimate(s, meshcat=True)["meshcat_bytes"] / size < 2.0
 
 
 def test_progress_bar_counts_simulated_seconds_and_real_time_factor(cache, tmp_path, capsys):

@@ -15,13 +15,15 @@ from lunar_drake.errors import ConfigError
 #: the estimate printed before a run.
 REALTIME_FACTOR = {"cameras": (1.2, 2.0), "no_cameras": (6.0, 10.0)}
 #: Bytes per pixel of one camera's saved frame (16-bit raw PNG + 8-bit preview PNG of
-#: the noisy 12-bit codes), measured on default-site frames.
-FRAME_BYTES_PER_PX = 1.6
-#: Meshcat's static replay (meshcat.html): bytes per simulated second of recording, and
-#: per terrain mesh vertex (``terrain_view.max_mesh_px`` squared), measured on the
-#: default and small scenarios.
-MESHCAT_BYTES_PER_S = 1.3e5
-MESHCAT_BYTES_PER_VERTEX = 40.0
+#: the noisy 12-bit codes): 1.5-1.9 measured on default-site frames at 640 x 480.
+FRAME_BYTES_PER_PX = 1.7
+#: Meshcat's static replay (meshcat.html): a base (the rover's meshes, the page), bytes
+#: per terrain mesh vertex (``terrain_view.max_mesh_px`` squared) and per simulated
+#: second of recording; fitted to the default scenario (10 s: 11.0 MB, 40 s: 14.6 MB)
+#: and the small one (1 s: 2.67 MB, 11 s: 3.88 MB).
+MESHCAT_BASE_BYTES = 2.3e6
+MESHCAT_BYTES_PER_VERTEX = 50.0
+MESHCAT_BYTES_PER_S = 1.2e5
 
 
 def run_estimate(scenario, *, meshcat: bool) -> dict:
@@ -34,12 +36,13 @@ def run_estimate(scenario, *, meshcat: bool) -> dict:
     rtf = REALTIME_FACTOR["cameras" if cam.enabled else "no_cameras"]
     frames = 0.0
     if cam.enabled and scenario.logging.save_frames:
-        n = math.floor(duration * cam.rate_hz)
+        n = math.floor(duration * cam.rate_hz) + 1  # t = 0 and every period
         frames = n * 2 * cam.width * cam.height * FRAME_BYTES_PER_PX
     html = 0.0
     if meshcat:
         px = scenario.terrain_view.max_mesh_px
-        html = MESHCAT_BYTES_PER_S * duration + MESHCAT_BYTES_PER_VERTEX * px * px
+        html = MESHCAT_BASE_BYTES + MESHCAT_BYTES_PER_VERTEX * px * px
+        html += MESHCAT_BYTES_PER_S * duration
     return {
         "minutes": (duration / rtf[1] / 60.0, duration / rtf[0] / 60.0),
         "frames_bytes": frames,
