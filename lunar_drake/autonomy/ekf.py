@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from lunar_drake.autonomy import ekf_kernels as _k
 from lunar_drake.errors import ConfigError, check_range
 
 N_ERR = 14
@@ -255,58 +256,39 @@ def slope_slip(R_WB, dx: float, table) -> float:
     return float(np.interp(climb_deg, t[:, 0], t[:, 1]) - np.interp(0.0, t[:, 0], t[:, 1]))
 
 
-def predict(x, P, *, gyro_radps, d_body, dt: float, config: EstimatorConfig):
+def kernel_params(config: EstimatorConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The config as :func:`predict`'s compiled kernel reads it: the slip-vs-slope table's
+    slopes (deg) and slips (empty without a table) and the noise parameters
+    (:data:`~lunar_drake.autonomy.ekf_kernels.NOISE_FIELDS`). Compute once per filter."""
+    t = np.asarray(config.slip_vs_slope, dtype=np.float64).reshape(-1, 2)
+    noise = np.array([float(getattr(config, f)) for f in _k.NOISE_FIELDS])
+    return np.ascontiguousarray(t[:, 0]), np.ascontiguousarray(t[:, 1]), noise
+
+
+def predict(x, P, *, gyro_radps, d_body, dt: float, config: EstimatorConfig, params=None):
     """(x, P) after one tick: gyro rate (3,) (rad/s, body), encoder displacement
-    ``d_body`` = (dx, dy) (m, body frame) over the tick, ``dt`` (s)."""
-    p, R, bg, s, beta = x[0:3], quat_to_matrix(x[3:7]), x[7:10], x[10], x[11]
-    u = np.array([float(d_body[0]), float(d_body[1]), 0.0])
-    if config.slip_vs_slope:
-        s = min(max(s + slope_slip(R, u[0], config.slip_vs_slope), -1.0), 0.99)
-    Ru = R @ u
-    Rside = R @ np.array([0.0, u[0], 0.0])
-    g = 1.0 - s
-    move = g * Ru + beta * Rside
-    xn = x.copy()
-    xn[0:3] = p + move
-    w = (np.asarray(gyro_radps, float) - bg) * dt
-    xn[3:7] = matrix_to_quat(R @ so3_exp(w))
-    F = np.eye(N_ERR)
-    F[_P, _TH] = -skew(move)
-    F[_P, _S] = -Ru
-    F[_P, _B] = Rside
-    F[_TH, _BG] = -R * dt
-    dist = math.hypot(u[0], u[1])
-    Q = np.zeros((N_ERR, N_ERR))
-    sh = (config.odometry_noise_fraction * dist) ** 2
-    sv = (config.odometry_vertical_fraction * dist) ** 2
-    Q[_P, _P] = R @ np.diag([sh, sh, sv]) @ R.T
-    Q[_TH, _TH] = np.eye(3) * (config.gyro_noise_density**2 + config.attitude_process_noise**2) * dt
-    Q[_BG, _BG] = np.eye(3) * config.gyro_bias_random_walk**2 * dt
-    Q[_S, _S] = config.slip_random_walk_per_sqrt_m**2 * dist
-    Q[_B, _B] = config.side_slip_random_walk_per_sqrt_m**2 * dist
-    Q[_BA, _BA] = np.eye(3) * config.accel_bias_random_walk**2 * dt
-    Pn = F @ P @ F.T + Q
-    return xn, 0.5 * (Pn + Pn.T)
+    ``d_body`` = (dx, dy) (m, body frame) over the tick, ``dt`` (s). ``params``:
+    :func:`kernel_params` of ``config`` (computed when not given).
 
-
-def _inject(x, dx) -> np.ndarray:
-    xn = x.copy()
-    xn[0:3] += dx[_P]
-    xn[3:7] = matrix_to_quat(so3_exp(dx[_TH]) @ quat_to_matrix(x[3:7]))
-    xn[7:10] += dx[_BG]
-    xn[10] += dx[_S]
-    xn[11] += dx[_B]
-    xn[12:15] += dx[_BA]
-    return xn
+    The model (module docstring): ``s' = clip(s + table(climb) - table(0))`` when a
+    slip-vs-slope table is given, ``p' = p + (1 - s') R u + beta dx R e_y``,
+    ``R' = R Exp((w_m - b_g) dt)``, ``P' = F P F^T + Q`` with ``F = I`` plus
+    ``dp/dtheta = -[move]x``, ``dp/ds = -R u``, ``dp/dbeta = dx R e_y``,
+    ``dtheta/db_g = -R dt``; computed by the compiled
+    :func:`lunar_drake.autonomy.ekf_kernels.predict` in one call."""
+    table_deg, table_slip, noise = kernel_params(config) if params is None else params
+    return _k.predict(np.asarray(x, np.float64), np.asarray(P, np.float64),
+                      np.asarray(gyro_radps, np.float64), float(d_body[0]), float(d_body[1]),
+                      float(dt), table_deg, table_slip, noise)  # fmt: skip
 
 
 def _update(x, P, r, H, Rn):
-    S = H @ P @ H.T + Rn
-    K = np.linalg.solve(S, H @ P).T  # P H^T S^-1 (S, P symmetric)
-    IKH = np.eye(N_ERR) - K @ H
-    Pn = IKH @ P @ IKH.T + K @ Rn @ K.T
-    nis = float(r @ np.linalg.solve(S, r))
-    return _inject(x, K @ r), 0.5 * (Pn + Pn.T), nis
+    """Joseph-form Kalman update and reset (compiled:
+    :func:`lunar_drake.autonomy.ekf_kernels.update`)."""
+    xn, Pn, nis = _k.update(np.asarray(x, np.float64), np.asarray(P, np.float64),
+                            np.asarray(r, np.float64), np.asarray(H, np.float64),
+                            np.asarray(Rn, np.float64))  # fmt: skip
+    return xn, Pn, float(nis)
 
 
 def update_attitude(x, P, *, q_measured, config: EstimatorConfig, R_BS=None):
@@ -368,6 +350,7 @@ __all__ = [
     "N_ERR",
     "EstimatorConfig",
     "initial_state",
+    "kernel_params",
     "matrix_to_quat",
     "pose_and_covariance",
     "pose_error",

@@ -67,6 +67,7 @@ import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from lunar_drake.errors import ConfigError, OutOfRangeError
@@ -409,6 +410,8 @@ def explicit_steer_twist(delta, omega, *, geometry: WheelGeometry) -> np.ndarray
     w = np.asarray(omega, dtype=np.float64)
     if d.ndim == 0 or d.shape[-1] != n or w.ndim == 0 or w.shape[-1] != n:
         raise ConfigError(f"delta {d.shape} and omega {w.shape} must both be (..., {n})")
+    if d.ndim == 1 and w.ndim == 1:  # one rover state (the flight's odometry, 100 Hz)
+        return _explicit_steer_twist_1(d, w, g.p_BS, g.steering_offset, g.wheel_radius)
     d, w = np.broadcast_arrays(d, w)
     c, s = np.cos(d), np.sin(d)
     cx = g.p_BS[:, 0] - g.steering_offset * s  # wheel centre c = p + o l, l = (-s, c)
@@ -423,6 +426,26 @@ def explicit_steer_twist(delta, omega, *, geometry: WheelGeometry) -> np.ndarray
     ata = np.einsum("...ki,...kj->...ij", a, a)
     atb = np.einsum("...ki,...k->...i", a, b)
     return np.linalg.solve(ata, atb[..., None])[..., 0]
+
+
+@numba.njit(cache=True)
+def _explicit_steer_twist_1(d, w, p_BS, offset, radius):  # pragma: no cover - numba
+    """:func:`explicit_steer_twist` of one state (n,): the same normal equations, summed
+    wheel by wheel in one compiled call."""
+    ata = np.zeros((3, 3))
+    atb = np.zeros(3)
+    for i in range(d.size):
+        c, s = math.cos(d[i]), math.sin(d[i])
+        cx = p_BS[i, 0] - offset[i] * s
+        cy = p_BS[i, 1] + offset[i] * c
+        roll = (c, s, -c * cy + s * cx)
+        side = (-s, c, s * cy + c * cx)
+        b = w[i] * radius[i]
+        for r in range(3):
+            atb[r] += roll[r] * b
+            for q in range(3):
+                ata[r, q] += roll[r] * roll[q] + side[r] * side[q]
+    return np.linalg.solve(ata, atb)
 
 
 # --------------------------------------------------------------------------------- servos

@@ -63,6 +63,7 @@ class StateEstimator(LeafSystem):
         super().__init__()
         config.validate()
         self._config = config
+        self._params = ekf.kernel_params(config)  # the compiled predict's view of config
         self._geometry = wheel_geometry_for(description)
         self._skid = description.steering == "skid"
         self._dt = 1.0 / float(config.rate_hz)
@@ -115,7 +116,7 @@ class StateEstimator(LeafSystem):
 
     def _update(self, context, discrete_state):
         s = self._s(context).copy()
-        x, P = self._filter(context)
+        x, P = s[_X], s[_PC].reshape(ekf.N_ERR, ekf.N_ERR)  # views of the copy (read only)
         cfg = self._config
         angles = np.asarray(self.wheel_angles_input.Eval(context), float)
         fix = np.asarray(self.q_WB_input.Eval(context), float)
@@ -139,7 +140,8 @@ class StateEstimator(LeafSystem):
             steer = np.zeros(N_WHEELS) if self._skid else self.steer_input.Eval(context)
             d = body_displacement(angles - s[_ANGLES], steer, geometry=self._geometry,
                                   skid=self._skid)  # fmt: skip
-            x, P = ekf.predict(x, P, gyro_radps=imu[:3], d_body=d[:2], dt=self._dt, config=cfg)
+            x, P = ekf.predict(x, P, gyro_radps=imu[:3], d_body=d[:2], dt=self._dt, config=cfg,
+                               params=self._params)  # fmt: skip
         s[_X] = x
         s[_PC] = P.ravel()
         s[_FIX] = fix
