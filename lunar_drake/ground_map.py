@@ -1,13 +1,14 @@
 """``ground_map.png``: the map the ground ended a run with, for people to look at.
 
-The ground's final costmap (the a-priori map refined, with the hazards its stereo found
-merged in; grey: cost per metre, red: lethal or within the rover's footprint of a
-hazard, purple: the orbital map's steep cells stereo has not yet seen, lethal until it
-does) around the traverse, the rover's true path (white), the ground's own pose
-estimate (cyan, dashed; VO-corrected when its perception runs), its stereo keyframes
-(dots: green VO fused, orange gated, red rejected) and the goals (stars). Matplotlib
-without pyplot (no backend forced on the caller); the PNG carries no software tag, so
-the same run gives the same bytes.
+The ground's final costmap around the traverse (grey: cost per metre of free cells;
+orange: the a-priori map's hazards, inflated by the rover's footprint; red: the hazards
+its stereo found, inflated; purple: the orbital map's steep cells stereo has not yet
+seen, lethal until it does), the rover's true path (black on white), the ground's own
+pose estimate (cyan, dashed, drawn over the truth; VO-corrected when its perception
+runs), its stereo keyframes (green: VO fused, gold: gated, black x: rejected) and the
+goals (blue stars), with the legend beside the map. Without ground perception (no
+cameras) the map is the a-priori one. Matplotlib without pyplot (no backend forced on
+the caller); the PNG carries no software tag, so the same run gives the same bytes.
 """
 
 from __future__ import annotations
@@ -18,17 +19,50 @@ import numpy as np
 
 from lunar_drake.files import atomic_path
 
-VO_COLOURS = {"accepted": "tab:green", "gated": "tab:orange", "rejected": "tab:red"}
+#: Keyframe markers by VO outcome: (marker, colour).
+VO_MARKERS = {"accepted": ("o", "tab:green"), "gated": ("s", "gold"), "rejected": ("x", "black")}
+#: Hazard colours: the a-priori map's, stereo's, and unconfirmed steep orbital cells.
+MAP_HAZARD = "tab:orange"
+STEREO_HAZARD = "red"
+UNCONFIRMED = "tab:purple"
+
+
+def hazard_classes(final, prior=None) -> dict:
+    """Boolean (rows, cols) masks of the ``final`` costmap's lethal cells by origin:
+    ``map`` (lethal in the a-priori ``prior`` too), ``stereo`` (lethal only since
+    stereo: free in ``prior``), ``unconfirmed`` (``final.unconfirmed``). Without a
+    ``prior`` on the same grid every lethal cell counts as the map's."""
+    lethal = ~np.isfinite(final.cost)
+    unconfirmed = (
+        np.zeros(lethal.shape, bool)
+        if final.unconfirmed is None
+        else np.asarray(final.unconfirmed, bool)
+    )
+    if prior is not None and np.shape(prior.cost) == lethal.shape:
+        stereo = lethal & np.isfinite(prior.cost)
+    else:
+        stereo = np.zeros(lethal.shape, bool)
+    return {"map": lethal & ~stereo & ~unconfirmed, "stereo": stereo, "unconfirmed": unconfirmed}
+
+
+def _overlay(ax, mask, colour, *, extent, alpha):
+    if not mask.any():
+        return
+    from matplotlib.colors import ListedColormap
+
+    ax.imshow(np.ma.masked_where(~mask, np.ones(mask.shape)), extent=extent,
+              cmap=ListedColormap([colour]), vmin=0.0, vmax=1.0, origin="upper",
+              alpha=alpha, interpolation="nearest")  # fmt: skip
 
 
 def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | None:
     """Writes ``path`` (PNG) from a run's ``logs`` (:class:`~lunar_drake.simulation.
-    SimulationLogs` with a ``ground_costmap``) and its ``scenario``; the view is the
-    traverse and the goals with ``margin_m`` (m) round them. Returns the path, or None
-    when the run kept no ground costmap."""
+    SimulationLogs` with a ``ground_costmap``, and ``ground_prior_costmap`` to tell the
+    stereo hazards from the map's) and its ``scenario``; the view is the traverse and
+    the goals with ``margin_m`` (m) round them. Returns the path, or None when the run
+    kept no ground costmap."""
     from matplotlib.figure import Figure
-
-    from lunar_drake.autonomy.planner import draw_unconfirmed
+    from matplotlib.patches import Patch
 
     cm = logs.ground_costmap
     if cm is None:
@@ -49,43 +83,57 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
     cost = cm.cost[r0:r1, c0:c1]
     extent = (cm.x0_m + c0 * res, cm.x0_m + c1 * res, cm.y1_m - r1 * res, cm.y1_m - r0 * res)
     aspect = (extent[3] - extent[2]) / max(extent[1] - extent[0], 1e-9)
-    fig = Figure(figsize=(8.0, float(np.clip(8.0 * aspect + 1.0, 4.0, 11.0))))
+    # The map 8 in wide, the legend in a column to its right.
+    fig = Figure(figsize=(11.0, float(np.clip(8.0 * aspect + 1.2, 4.5, 11.0))),
+                 layout="constrained")  # fmt: skip
     ax = fig.subplots()
     finite = np.where(np.isfinite(cost), cost, np.nan)
     ax.imshow(finite, extent=extent, cmap="Greys", origin="upper", interpolation="nearest")
-    lethal = np.ma.masked_where(np.isfinite(cost), np.ones(cost.shape))
-    ax.imshow(lethal, extent=extent, cmap="autumn", origin="upper", alpha=0.6,
-              interpolation="nearest")  # fmt: skip
-    if cm.unconfirmed is not None:
-        draw_unconfirmed(ax, cm.unconfirmed[r0:r1, c0:c1], extent=extent)
-    ax.plot(truth[:, 0], truth[:, 1], color="white", lw=2.2)
-    ax.plot(truth[:, 0], truth[:, 1], color="black", lw=0.8, label="truth")
+    classes = hazard_classes(cm, getattr(logs, "ground_prior_costmap", None))
+    classes = {k: v[r0:r1, c0:c1] for k, v in classes.items()}
+    handles = []
+    for key, colour, alpha, label in (
+        ("map", MAP_HAZARD, 0.55, "hazard on the a-priori map (inflated)"),
+        ("stereo", STEREO_HAZARD, 0.8, "hazard found by stereo (inflated)"),
+        ("unconfirmed", UNCONFIRMED, 0.7, "steep on the orbital map, not yet seen"),
+    ):
+        if classes[key].any():
+            _overlay(ax, classes[key], colour, extent=extent, alpha=alpha)
+            handles.append(Patch(facecolor=colour, alpha=alpha, label=label))
+    # The truth wide (black on a white halo), the estimate thin and dashed over it: both
+    # show where they coincide.
+    ax.plot(truth[:, 0], truth[:, 1], color="white", lw=4.0, zorder=3)
+    (line,) = ax.plot(truth[:, 0], truth[:, 1], color="black", lw=2.0, zorder=3,
+                      label="true path")  # fmt: skip
+    handles.insert(0, line)
     if len(est_xy):
-        ax.plot(est_xy[:, 0], est_xy[:, 1], "--", color="tab:cyan", lw=1.2,
-                label="ground's estimate")  # fmt: skip
-    for kind, colour in VO_COLOURS.items():
+        (line,) = ax.plot(est_xy[:, 0], est_xy[:, 1], color="tab:cyan", lw=1.3,
+                          ls=(0, (4, 2)), zorder=5, label="ground's estimate")  # fmt: skip
+        handles.insert(1, line)
+    for kind, (marker, colour) in VO_MARKERS.items():
         k = [(r.x_m, r.y_m) for r in logs.keyframes if r.vo == kind]
         if k:
             k = np.array(k)
-            ax.plot(k[:, 0], k[:, 1], "o", ms=3.5, color=colour, label=f"keyframe: VO {kind}")
+            (m,) = ax.plot(k[:, 0], k[:, 1], marker, ms=4, color=colour, mec="black",
+                           mew=0.5, ls="none", zorder=4, label=f"keyframe: VO {kind}")  # fmt: skip
+            handles.append(m)
     if len(goals):
-        ax.plot(goals[:, 0], goals[:, 1], "*", ms=14, color="tab:blue", mec="white",
-                label="goals")  # fmt: skip
+        (g,) = ax.plot(goals[:, 0], goals[:, 1], "*", ms=14, color="tab:blue", mec="white",
+                       ls="none", zorder=6, label="goals")  # fmt: skip
+        handles.append(g)
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     ax.set_xlabel("x (m, east)")
     ax.set_ylabel("y (m, north)")
     ax.set_aspect("equal")
-    title = f"The ground's map at t = {logs.simulated_s:.0f} s (red: hazards"
-    if cm.unconfirmed is not None:
-        title += "; purple: steep, unseen"
-    ax.set_title(title + ")", fontsize=11)
-    ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
+    source = scenario.ground.map.source
+    ax.set_title(f"The ground's map at t = {logs.simulated_s:.0f} s ({source} a-priori map)",
+                 fontsize=11)  # fmt: skip
+    fig.legend(handles=handles, fontsize=8, loc="outside right upper", frameon=False)
     path = Path(path)
     with atomic_path(path, what=path.name) as tmp:
         fig.savefig(tmp, dpi=100, format="png", metadata={"Software": None})
     return path
 
 
-__all__ = ["write_ground_map"]
+__all__ = ["hazard_classes", "write_ground_map"]

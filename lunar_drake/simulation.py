@@ -107,8 +107,10 @@ class SimulationLogs:
             :class:`~lunar_drake.comms.science.ScienceRecord`) each, in sample order.
         keyframes: the ground perception's processed keyframes
             (:class:`~lunar_drake.perception.ground_pipeline.KeyframeRecord`).
-        ground_costmap: the ground's final costmap (a-priori + stereo hazards), or None
-            without ground perception.
+        ground_costmap: the ground's final costmap (a-priori + stereo hazards; the
+            a-priori one without ground perception), or None when it had no map.
+        ground_prior_costmap: the ground's a-priori costmap on the grid of
+            ``ground_costmap`` (the stereo hazards are where they differ), or None.
         preflight: what the mission had before launch
             (:func:`lunar_drake.preflight.describe`: the ground's map and its source, the
             flight's slip calibration).
@@ -131,6 +133,7 @@ class SimulationLogs:
     science_received: list = dc.field(default_factory=list)
     keyframes: list = dc.field(default_factory=list)
     ground_costmap: object = None
+    ground_prior_costmap: object = None
     preflight: dict = dc.field(default_factory=dict)
 
 
@@ -333,11 +336,12 @@ def simulate(
         rx = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.science")
         science = [(d.t_received_s, d.message.payload)
                    for d in rx.received(rx.GetMyContextFromRoot(root))]  # fmt: skip
-    keyframes, costmap = [], None
+    keyframes, costmap, prior = [], operator.prior_costmap, operator.prior_costmap
     if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.perception"):
         gp = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.perception")
         pst = gp.perception_state(root)
         keyframes, costmap = pst.records.items(), pst.costmap
+        prior = gp.costmap_output.Allocate().get_value()[1]  # the prior, refined
     return SimulationLogs(
         simulated_s=simulated,
         stop_reason=stop_reason[0],
@@ -353,6 +357,7 @@ def simulate(
         science_received=science,
         keyframes=keyframes,
         ground_costmap=costmap,
+        ground_prior_costmap=prior,
         preflight=preflight.describe(scenario, map_product=map_product),
         wall={
             "build_s": t_built - t0,

@@ -185,7 +185,7 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
     from the previous one) are refused here, before the run."""
     g = scenario.ground
     builder = DiagramBuilder()
-    planner, in_map, prior_dem, preview = None, None, None, None
+    planner, in_map, prior_dem, preview, costmap = None, None, None, None, None
     if map_product is not None:
         costmap = ground_costmap(scenario, map_product)
         planner = plan_waypoints(
@@ -227,6 +227,7 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
             actions=scheduled_requests(scenario),
             in_map=in_map,
             preview=preview,
+            costmap=costmap,
         ),
     )
     receiver = builder.AddNamedSystem("ground.telemetry", TelemetryReceiver(rate_hz=g.rate_hz))

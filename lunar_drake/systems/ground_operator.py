@@ -66,11 +66,15 @@ class GroundOperator(LeafSystem):
             by :meth:`send_goal`).
         preview: ``preview(pose, waypoints)`` -> predicted path of a goto (the command
             preview), or None.
+        costmap: the a-priori costmap ``planner`` plans on, or None; kept as
+            :attr:`prior_costmap` for the run's logs and plots (plans go through
+            ``planner``).
     """
 
     def __init__(self, *, params: OperatorParams, rate_hz: float, planner, start_pose,
-                 actions=(), in_map=None, preview=None):  # fmt: skip
+                 actions=(), in_map=None, preview=None, costmap=None):  # fmt: skip
         super().__init__()
+        self.prior_costmap = costmap
         self._params = params
         self._planner = planner
         self._start = tuple(float(v) for v in start_pose)
