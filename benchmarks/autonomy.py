@@ -14,9 +14,11 @@ and replanning; with ``--no-stereo`` -- the default with ``--map truth`` -- came
 time for three times the straight-line distance at the drive speed plus two minutes,
 ending 20 s after the ground has judged the goal reached or failed),
 written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
-mean_drift_pct, rtt_s, map`` and ``runs`` (``goal_xy, reached, strikes, final_error_m,
-distance_m, drift_pct, run_dir``; a goal the ground could not plan to on its map is
-``reached: false`` with ``error``). Prints a table.
+mean_drift_pct, mean_position_nees, rtt_s, map`` and ``runs`` (``goal_xy, reached,
+strikes, final_error_m, distance_m, drift_pct, position_nees, run_dir``; a goal the
+ground could not plan to on its map is ``reached: false`` with ``error``).
+``position_nees``: the on-board EKF's horizontal position NEES over the run, its mean
+(2 for a consistent filter; ``metrics.position_nees``), scored on truth. Prints a table.
 """
 
 from __future__ import annotations
@@ -112,6 +114,7 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str 
         "final_error_m": g["final_distance_m"],
         "distance_m": moved,
         "drift_pct": 100.0 * loc["final_position_error_m"] / moved if moved > 0 else None,
+        "position_nees": (loc.get("position_nees") or {}).get("mean"),
         "safings": sum(summary["modes"]["safings"].values()),
         "replans": summary["ground"]["replans"],
         "rtt_s": float(rtt),
@@ -164,12 +167,14 @@ def main(argv=None) -> int:
 
         rows = [run_goal(*j) for j in tqdm(jobs, desc="goals", unit="run")]
     drifts = [r["drift_pct"] for r in rows if r.get("drift_pct") is not None]
+    nees = [r["position_nees"] for r in rows if r.get("position_nees") is not None]
     rtts = [r["rtt_s"] for r in rows if "rtt_s" in r and math.isfinite(r["rtt_s"])]
     result = {
         "goals": len(rows),
         "reached": sum(bool(r["reached"]) for r in rows),
         "hazard_strikes": sum(r["strikes"] for r in rows),
         "mean_drift_pct": float(np.mean(drifts)) if drifts else None,
+        "mean_position_nees": float(np.mean(nees)) if nees else None,
         "rtt_s": float(np.mean(rtts)) if rtts else None,
         "safings": sum(r.get("safings", 0) for r in rows),
         "map": a.map,
@@ -180,7 +185,7 @@ def main(argv=None) -> int:
     }
     print(
         f"{'goal':>16} {'reached':>8} {'strikes':>8} {'final m':>8} {'driven m':>9} {'drift %':>8}"
-        f" {'safed':>6} {'replans':>8}"
+        f" {'safed':>6} {'replans':>8} {'NEES xy':>8}"
     )
     for r in rows:
         fe = r.get("final_error_m")
@@ -189,12 +194,14 @@ def main(argv=None) -> int:
             f"{r['strikes']:>8} {'-' if fe is None else f'{fe:.2f}':>8} "
             f"{r.get('distance_m', float('nan')):>9.1f} "
             f"{r.get('drift_pct') or float('nan'):>8.2f} "
-            f"{r.get('safings', 0):>6} {r.get('replans', 0):>8}"
+            f"{r.get('safings', 0):>6} {r.get('replans', 0):>8} "
+            f"{r.get('position_nees') or float('nan'):>8.2f}"
             + (f"  {r['error']}" if "error" in r else "")
         )
     print(
         f"{result['reached']}/{result['goals']} goals reached, {result['hazard_strikes']} hazard "
         f"strikes, {result['safings']} safings, mean drift {result['mean_drift_pct']}, "
+        f"mean position NEES {result['mean_position_nees']} (2: consistent), "
         f"rtt {result['rtt_s']} s ({a.map} map)"
     )
     if a.out:

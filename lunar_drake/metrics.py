@@ -74,12 +74,42 @@ def parked_drift(logs: SimulationLogs, *, settle_s: float = 2.0) -> dict | None:
     }
 
 
+#: The 95 % interval of a chi-square variable with 2 degrees of freedom.
+CHI2_2DOF_95 = (0.0506356, 7.3777589)
+
+
+def position_nees(logs: SimulationLogs) -> dict | None:
+    """The on-board estimate's horizontal position (x, y) NEES over the run, scored on
+    truth: ``e^T C^-1 e`` per logged sample (e the true minus the estimated position, m;
+    C the EKF's 2 x 2 position covariance, m^2), the first sample (before any filter
+    update) left out. ``mean`` is 2 for a consistent filter (below: too pessimistic,
+    above: overconfident); ``inside_95`` the fraction of samples inside the 2-dof 95 %
+    chi-square interval :data:`CHI2_2DOF_95`; ``final``: the last sample's. None without
+    a covariance log."""
+    cov = logs.vectors.get("flight.pose_covariance")
+    est = logs.vectors.get("flight.pose_estimate")
+    pose = logs.vectors["truth.pose"].data
+    if cov is None or est is None or len(cov.data) < 2 or len(pose) < 2:
+        return None
+    n = min(len(cov.data), len(est.data), len(pose))
+    C = cov.data[1:n].reshape(-1, 6, 6)[:, :2, :2]
+    e = pose[1:n, :2] - est.data[1:n, :2]
+    nees = np.einsum("ki,ki->k", e, np.linalg.solve(C, e[:, :, None])[:, :, 0])
+    lo, hi = CHI2_2DOF_95
+    return {
+        "mean": _r(float(nees.mean()), 4),
+        "inside_95": _r(float(np.mean((nees > lo) & (nees < hi))), 4),
+        "final": _r(float(nees[-1]), 4),
+    }
+
+
 def localization(logs: SimulationLogs) -> dict:
     """The on-board estimate against truth: at the end, the horizontal position error (m),
     its ratio to the distance driven, the heading error (deg) and the estimate's own 1
     sigma; over the run, the EKF's normalized estimation error squared (NEES, 6 dof:
     position with z relative to the start, world-frame attitude error) -- its mean and
-    the fraction of samples inside the 95 % chi-square interval (1.24, 14.45)."""
+    the fraction of samples inside the 95 % chi-square interval (1.24, 14.45); and the
+    horizontal position's own NEES (:func:`position_nees`, 2 dof)."""
     from lunar_drake.autonomy.ekf import so3_log
     from lunar_drake.rotations import rotation_matrix_from_rpy
 
@@ -115,6 +145,7 @@ def localization(logs: SimulationLogs) -> dict:
         n = np.array(nees)
         out["nees_mean"] = _r(float(n.mean()), 4)
         out["nees_inside_95"] = _r(float(np.mean((n > 1.2373) & (n < 14.4494))), 4)
+    out["position_nees"] = position_nees(logs)
     return out
 
 

@@ -72,7 +72,10 @@ class EstimatorConfig:
         odometry_noise_fraction: white odometry noise per step, fraction of the step's
             length (horizontal, each axis). odometry_vertical_fraction: same, vertical.
         slip_prior, slip_sigma0: the odometry slip assumed at the start (e.g. from
-            the slip study on this soil) and its sigma (-).
+            the slip study on this soil) and its sigma (-): how far a pre-flight
+            calibration's level slip may be from the Moon's (the default 0.025: GRC-1's
+            0.068 against the 0.092 the rover made on the default site; docs/design.md,
+            "How sure the on-board estimate is").
         slip_vs_slope: optional ``[[slope_deg, slip], ...]`` (slopes increasing, 0
             among them): how slip changes when climbing (positive) or descending
             (negative) along the direction of travel, e.g. ``reference_slip`` from
@@ -109,12 +112,12 @@ class EstimatorConfig:
     odometry_noise_fraction: float = 0.01
     odometry_vertical_fraction: float = 0.05
     slip_prior: float = 0.1
-    slip_sigma0: float = 0.08
+    slip_sigma0: float = 0.025
     slip_vs_slope: list[list[float]] = dc.field(default_factory=list)
     slip_calibration: str = ""
-    slip_random_walk_per_sqrt_m: float = 0.01
-    side_slip_sigma0: float = 0.02
-    side_slip_random_walk_per_sqrt_m: float = 0.005
+    slip_random_walk_per_sqrt_m: float = 0.002
+    side_slip_sigma0: float = 0.015
+    side_slip_random_walk_per_sqrt_m: float = 0.003
     position_sigma0_m: float = 0.05
     attitude_sigma0_rad: float = 0.05
 
