@@ -345,10 +345,31 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
     return summary
 
 
-def _lcs(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
-    """NIRVSS records received, and the LCS temperature against the world model's spot
-    temperature at the true position (RMSE, K)."""
+def _nd(x, nd: int = 6):
+    return None if x is None else _r(x, nd)
+
+
+def _scored(prefix: str, a: dict, unit: str) -> dict:
+    """``{prefix}_r``, ``_cells``, ``_rmse_{unit}``, ``_bias_{unit}`` of an
+    :func:`~lunar_drake.science.scoring.agreement`."""
+    return {
+        f"{prefix}_r": _nd(a["r"]),
+        f"{prefix}_cells": a["cells"],
+        f"{prefix}_rmse_{unit}": _nd(a["rmse"]),
+        f"{prefix}_bias_{unit}": _nd(a["bias"]),
+    }
+
+
+def _lcs(*, scenario: Scenario, site: SiteData, logs: SimulationLogs, grids: dict) -> dict:
+    """NIRVSS records received; the ground's LCS and NIRVSS maps against the world
+    model's layers averaged over each map cell (``lcs_world_*``: temperature, K;
+    ``nirvss_world``: per band, the cells' band depth over its coefficient -- the
+    abundance the band implies -- against the layer it reads); and, as the
+    instrument's performance, the LCS against the spot it read at the true position
+    (``lcs_spot_rmse_K``)."""
+    from lunar_drake.rotations import rotation_matrix_from_rpy
     from lunar_drake.science.nirvss import spot_means
+    from lunar_drake.science.scoring import nirvss_world, world_agreement
     from lunar_drake.science.world import surface_map
 
     recs = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
@@ -357,49 +378,95 @@ def _lcs(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
         return out
     cfg = scenario.sensors.nirvss
     smap = surface_map(scenario=scenario, site=site)
+    geo = {"x0_m": smap.x0_m, "y1_m": smap.y1_m, "resolution_m": smap.resolution_m}
+    if grids.get("lcs") is not None:
+        out.update(_scored("lcs_world", world_agreement(grids["lcs"],
+                           smap.layers["temperature_K"], **geo), "K"))  # fmt: skip
+    if grids.get("nirvss") is not None:
+        out["nirvss_world"] = {
+            band: {k: (_nd(v) if k != "cells" else v) for k, v in a.items()}
+            for band, a in nirvss_world(grids["nirvss"], smap=smap, config=cfg).items()
+        }
     pose = logs.vectors["truth.pose"]
     err = []
-    from lunar_drake.rotations import rotation_matrix_from_rpy
-
     for r in recs:
         k = min(int(np.searchsorted(pose.times, r.t_sample_s - 1e-9)), len(pose.times) - 1)
         row = pose.data[k]  # the logged true pose at the sample time
         p = row[:3] + rotation_matrix_from_rpy(row[3:6]) @ np.array([cfg.x_m, 0.0, 0.0])
         spot = spot_means(smap, float(p[0]), float(p[1]), radius_m=cfg.spot_radius_m)
         err.append(r.values[-1] - spot["temperature_K"])
-    out["lcs_rmse_K"] = _r(float(np.sqrt(np.mean(np.square(err)))))
+    out["lcs_spot_rmse_K"] = _r(float(np.sqrt(np.mean(np.square(err)))))
+    return out
+
+
+def _drill(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """Drill samples received and the ground's drill product against the world at the
+    holes it claims (:func:`lunar_drake.science.scoring.drill_world`)."""
+    from lunar_drake.science.scoring import drill_holes, drill_world
+    from lunar_drake.science.world import surface_map
+
+    recs = [r for _t, r in logs.science_received if r.instrument == "drill"]
+    out = {"drill_samples": len(recs)}
+    if not recs:
+        return out
+    nir = scenario.sensors.nirvss
+    holes = drill_holes(recs, hole_x_m=scenario.sensors.drill.x_m,
+                        ice_per_wt_pct=nir.ice_per_wt_pct, sigma=nir.sigma_lamp)  # fmt: skip
+    w = drill_world(holes, smap=surface_map(scenario=scenario, site=site))
+    out["drill_world_rmse_wt_pct"] = _nd(w["rmse_wt_pct"])
+    out["drill_holes"] = [{k: (_nd(v) if isinstance(v, float) else v) for k, v in h.items()}
+                          for h in w["holes"]]  # fmt: skip
     return out
 
 
 def science(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
-    """NSS scoring on truth: records received, the ground's mean hydrogen estimate and
-    its correlation with the world model's footprint hydrogen at the true positions over
-    2 m cells (:func:`lunar_drake.science.products.nss_truth`)."""
-    from lunar_drake.science.products import nss_table, nss_truth
+    """Science scored on truth. Each ground map (2 m cells,
+    :func:`lunar_drake.science.products.instrument_grid`) against the world model's own
+    layers averaged over each cell it publishes (``*_world_*``,
+    :mod:`lunar_drake.science.scoring`): NSS hydrogen against the world's
+    depth-weighted hydrogen column (``nss_world_*``; ``nss_cells_seen``: cells with
+    records, published or not); LCS and NIRVSS (:func:`_lcs`). As the instruments'
+    performance: NSS against the footprint hydrogen the detector saw at its true
+    positions (``nss_footprint_*``, :func:`lunar_drake.science.products.nss_truth`),
+    the LCS against its spot. The drill: its product at the holes the ground claims
+    against the world's dry layer and ice there (:func:`_drill`)."""
+    from lunar_drake.science.products import (
+        instrument_grid,
+        instrument_records,
+        nss_table,
+        nss_truth,
+    )
+    from lunar_drake.science.scoring import agreement, nss_world
     from lunar_drake.science.world import hydrogen_map
 
+    keyframes = getattr(logs, "keyframes", None) or ()
+    recs = instrument_records(logs.science_received, scenario=scenario, keyframes=keyframes)
+    grids = {name: instrument_grid(name, *r, scenario=scenario) for name, r in recs.items()}
     out = {}
     if scenario.sensors.nirvss.enabled:
-        out.update(_lcs(scenario=scenario, site=site, logs=logs))
+        out.update(_lcs(scenario=scenario, site=site, logs=logs, grids=grids))
     if scenario.sensors.drill.enabled:
-        out["drill_samples"] = sum(1 for _t, r in logs.science_received if r.instrument == "drill")
+        out.update(_drill(scenario=scenario, site=site, logs=logs))
     if not scenario.sensors.nss.enabled:
         return out
     cfg = scenario.sensors.nss
-    table = nss_table(logs.science_received, config=cfg,
-                      keyframes=getattr(logs, "keyframes", None) or ())  # fmt: skip
+    table = nss_table(logs.science_received, config=cfg, keyframes=keyframes)
     out["nss_records"] = len(table)
     if not len(table):
         return out
+    hmap = hydrogen_map(scenario=scenario, site=site)
     pose = logs.vectors["truth.pose"]
     t = nss_truth(table, truth_times=pose.times, truth_xy_yaw=pose.data[:, [0, 1, 5]],
-                  hmap=hydrogen_map(scenario=scenario, site=site), config=cfg)  # fmt: skip
-    out.update({
-        "weh_est_mean_wt_pct": _r(float(np.mean(table.weh_est))),
-        "weh_truth_mean_wt_pct": _r(float(np.mean(t["truth_weh"]))),
-        "nss_truth_r": None if t["r"] is None else _r(t["r"]),
-        "nss_cells": t["cells"],
-        "nss_rmse_wt_pct": None if t["rmse_wt_pct"] is None else _r(t["rmse_wt_pct"]),
-        "nss_bias_wt_pct": None if t["bias_wt_pct"] is None else _r(t["bias_wt_pct"]),
-    })  # fmt: skip
+                  hmap=hmap, config=cfg)  # fmt: skip
+    grid = grids["nss"]
+    world = agreement([], []) if grid is None else nss_world(grid, hmap=hmap, config=cfg)
+    footprint = {"r": t["r"], "cells": t["cells"], "rmse": t["rmse_wt_pct"],
+                 "bias": t["bias_wt_pct"]}  # fmt: skip
+    out.update(
+        weh_est_mean_wt_pct=_r(float(np.mean(table.weh_est))),
+        weh_truth_mean_wt_pct=_r(float(np.mean(t["truth_weh"]))),
+        **_scored("nss_world", world, "wt_pct"),
+        nss_cells_seen=int(np.count_nonzero(grid.count)) if grid is not None else 0,
+        **_scored("nss_footprint", footprint, "wt_pct"),
+    )
     return out

@@ -77,25 +77,31 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
     assert summary["science"]["nss_records"] == len(recs)
     assert summary["science"]["nirvss_records"] == len(nir)
     sci = summary["science"]
-    assert (sci["nss_bias_wt_pct"] is None) == (sci["nss_cells"] == 0)  # scored cells only
-    assert 0.3 < summary["science"]["lcs_rmse_K"] < 3.0  # the 1 K noise, a few samples
+    for k in ("footprint", "world"):  # scored cells only
+        assert (sci[f"nss_{k}_bias_wt_pct"] is None) == (sci[f"nss_{k}_cells"] == 0)
+    assert sci["nss_world_cells"] <= sci["nss_cells_seen"]
+    assert 0.3 < sci["lcs_spot_rmse_K"] < 3.0  # the 1 K noise, a few samples
+    assert sci["lcs_world_cells"] >= 1 and sci["lcs_world_rmse_K"] is not None
+    assert set(sci["nirvss_world"]) >= {"oh", "plagioclase"}
     outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall, site=site)
     import rasterio
 
-    for stem, n_bands, n_records in (("nss_map", 3, len(recs)), ("nirvss_map", 8, len(nir)),
+    for stem, n_bands, n_records in (("nss_map", 4, len(recs)), ("nirvss_map", 8, len(nir)),
                                      ("lcs_map", 2, len(nir))):  # fmt: skip
         assert (tmp_path / f"{stem}.png").stat().st_size > 1000
         with rasterio.open(tmp_path / f"{stem}.tif") as ds:
             assert ds.count == n_bands and ds.crs is not None and ds.res == (2.0, 2.0)
             assert ds.descriptions[-1] == "records"
             a = ds.read()
-        assert np.isfinite(a[0]).any() and np.isnan(a[0]).any()  # cells with and without
+        shown = a[-2] if stem == "nss_map" else a[0]  # NSS: the share, in every seen cell
+        assert np.isfinite(shown).any() and np.isnan(shown).any()  # cells with and without
         assert a[-1].sum() == n_records and np.isnan(a[0][a[-1] == 0]).all()
     ox, oy = site.heightfield.origin_xy
     cfg = s.sensors.nss
     with rasterio.open(tmp_path / "nss_map.tif") as ds:
-        assert ds.descriptions == ("weh_wt_pct", "weh_sigma_wt_pct", "records")
-        weh, sigma, count = ds.read()
+        assert ds.descriptions == ("weh_wt_pct", "weh_sigma_wt_pct", "footprint_share",
+                                   "records")  # fmt: skip
+        weh, sigma, share, count = ds.read()
         cells = {}
         for r in recs:  # each record in the cell of its footprint, 0.9 m ahead
             yaw = r.pose_estimate[5]
@@ -105,7 +111,10 @@ def test_nss_records_reach_the_ground_only_through_the_downlink(small_site, tmp_
         for (row, col), rs in cells.items():  # the cell's pooled counts, inverted
             n = sum(r.values[0] for r in rs)
             t = sum(r.integration_s for r in rs)
-            assert count[row, col] == len(rs)
+            assert count[row, col] == len(rs) and 0.0 < share[row, col] < 1.0
+            if share[row, col] < 0.5:  # most of what it measured lies outside the cell
+                assert np.isnan(weh[row, col]) and np.isnan(sigma[row, col])
+                continue
             assert weh[row, col] == pytest.approx((250.0 * t / n - 1.0) / 0.2, abs=1e-5)
             assert sigma[row, col] == pytest.approx(250.0 * t / (0.2 * n**1.5), rel=1e-5)
     with open(tmp_path / "nss.csv") as f:
@@ -178,7 +187,30 @@ def test_the_drill_brings_up_samples_that_nirvss_reads(small_site, tmp_path):
             truth, abs=4 * cfg.sigma_lamp / cfg.ice_per_wt_pct
         )
     summary = metrics.summarize(scenario=s, site=site, logs=logs)
-    assert summary["science"]["drill_samples"] == 5
+    sci = summary["science"]
+    assert sci["drill_samples"] == 5
+    # Scored against the world where the ground puts the hole (0.6 m ahead of its
+    # estimate at the first sample): the world's layers over the 0.1 m square about it,
+    # sampled here every 1 mm, each sample reading its own pixel.
+    (hole,) = sci["drill_holes"]
+    e = recs[0].pose_estimate
+    hx, hy = e[0] + 0.6 * math.cos(e[5]), e[1] + 0.6 * math.sin(e[5])
+    smap = surface_map(scenario=s, site=site)
+    u = np.arange(-0.0495, 0.05, 0.001)
+    cols = np.floor((hx + u - smap.x0_m) / smap.resolution_m).astype(int)
+    rows = np.floor((smap.y1_m - (hy + u)) / smap.resolution_m).astype(int)
+    dry_w, ice_w = (float(smap.layers[k][np.ix_(rows, cols)].mean())
+                    for k in ("dry_layer_m", "ice_wt_pct"))  # fmt: skip
+    assert hole["hole_xy_est_m"] == pytest.approx([hx, hy], abs=1e-4)
+    assert hole["dry_layer_world_m"] == pytest.approx(dry_w, abs=2e-3)
+    assert hole["ice_world_wt_pct"] == pytest.approx(ice_w, rel=2e-3)
+    icy = [r.values[1] for r in recs if r.values[2] > 3 * cfg.sigma_lamp]
+    assert hole["dry_layer_est_m"] == pytest.approx(icy[0]) and icy[0] >= dry
+    assert hole["dry_layer_bracketed"] == (icy[0] - 0.1 < dry_w <= icy[0])
+    world = [ice_w if r.values[1] >= dry_w else 0.0 for r in recs]
+    got = [r.values[2] / cfg.ice_per_wt_pct for r in recs]
+    assert sci["drill_world_rmse_wt_pct"] == pytest.approx(
+        math.sqrt(np.mean(np.square(np.subtract(got, world)))), abs=1e-5)
     outputs.write_run(tmp_path, scenario=s, logs=logs, summary=summary, timing=logs.wall)
     with open(tmp_path / "drill.csv") as f:
         rows = list(csv.DictReader(f))

@@ -292,16 +292,17 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
               f"{drift}")  # fmt: skip
     sci = summary.get("science") or {}
     if "nirvss_records" in sci:
-        rmse = sci.get("lcs_rmse_K")
-        lcs = f"; LCS {rmse:.2f} K RMS from the truth" if rmse is not None else ""
+        rmse = sci.get("lcs_world_rmse_K")
+        lcs = f"; LCS map {rmse:.2f} K RMS from the world's cells" if rmse is not None else ""
         drill = f"; {sci['drill_samples']} drill samples" if "drill_samples" in sci else ""
         print(
             f"Science: the ground received "
             f"{plural(sci['nirvss_records'], 'NIRVSS record')}{lcs}{drill}"
         )
     if "nss_records" in sci:
-        r = sci.get("nss_truth_r")
-        score = f"; against truth r = {r:.2f} over {sci['nss_cells']} cells of 2 m" if r else ""
+        r, rf = sci.get("nss_world_r"), sci.get("nss_footprint_r")
+        score = (f"; map against the world r = {r:.2f} over {sci['nss_world_cells']} cells of"
+                 f" 2 m" if r else "") + (f" (instrument: r = {rf:.2f})" if rf else "")  # fmt: skip
         print(f"Science: the ground received {plural(sci['nss_records'], 'NSS record')}"
               + (f", mean hydrogen {sci['weh_est_mean_wt_pct']:.2f} wt% WEH (truth "
                  f"{sci['weh_truth_mean_wt_pct']:.2f})" if sci["nss_records"] else "")

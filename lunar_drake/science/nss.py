@@ -161,6 +161,30 @@ def footprint_weh(hmap: HydrogenMap, x_m: float, y_m: float, *, config: NSSConfi
     return float((w * weh_column(hmap, config=config, window=(r0, r1, c0, c1))).sum() / total)
 
 
+def footprint_share(x_m, y_m, *, x_west_m, y_south_m, cell_m: float, config: NSSConfig,
+                    step_m: float = 0.05) -> np.ndarray:  # fmt: skip
+    """Share (-) of the response of a detector above each point (x, y) (site m) that
+    comes from the square ``[x_west, x_west + cell_m) x [y_south, y_south + cell_m)``
+    (arrays of the same length as ``x_m``): the footprint weight ``h / (h^2 + r^2)^1.5``
+    over the square (midpoint rule, samples ``step_m`` apart or finer) over its
+    integral over the disk of ``footprint_radius_m``, ``2 pi (1 - h / sqrt(h^2 +
+    R^2))``."""
+    x = np.atleast_1d(np.asarray(x_m, np.float64))
+    y = np.atleast_1d(np.asarray(y_m, np.float64))
+    xw = np.broadcast_to(np.asarray(x_west_m, np.float64), x.shape)
+    ys = np.broadcast_to(np.asarray(y_south_m, np.float64), x.shape)
+    n = max(1, math.ceil(cell_m / step_m))
+    u = (np.arange(n) + 0.5) * (cell_m / n)
+    h, R = config.height_m, config.footprint_radius_m
+    total = 2.0 * math.pi * (1.0 - h / math.hypot(h, R))
+    out = np.empty(x.shape)
+    for k in range(x.size):
+        d2 = (xw[k] + u[None, :] - x[k]) ** 2 + (ys[k] + u[:, None] - y[k]) ** 2
+        w = np.where(d2 <= R * R, h / (h * h + d2) ** 1.5, 0.0)
+        out[k] = w.sum() * (cell_m / n) ** 2 / total
+    return out
+
+
 def count_rates(weh_wt_pct, *, config: NSSConfig) -> tuple:
     """Expected ``(epithermal, thermal)`` count rates (1/s) at WEH ``weh_wt_pct``."""
     w = np.asarray(weh_wt_pct, np.float64)
@@ -206,6 +230,7 @@ __all__ = [
     "NSSConfig",
     "count_rates",
     "draw_counts",
+    "footprint_share",
     "footprint_weh",
     "ice_depth_weight",
     "weh_column",

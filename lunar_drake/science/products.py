@@ -24,6 +24,7 @@ import numpy as np
 
 from lunar_drake.science.nss import (
     NSSConfig,
+    footprint_share,
     footprint_weh,
     weh_from_epithermal,
     weh_sigma_from_epithermal,
@@ -207,36 +208,62 @@ def grid_records(x, y, values, *, cell_m: float, margin_cells: int = 2) -> Grid 
     return Grid(mean, total, count, float(x0), float(y1), float(cell_m))
 
 
+#: The share of a cell's detector response that must come from inside the cell for the
+#: NSS map to publish it (:func:`nss_grid`): more than half of what it measured.
+MIN_FOOTPRINT_SHARE = 0.5
+
+
+def nss_grid(x, y, epithermal, seconds, *, config: NSSConfig, cell_m: float = 2.0,
+             min_share: float = MIN_FOOTPRINT_SHARE) -> Grid | None:  # fmt: skip
+    """The ground's NSS map from records placed at detector positions (x, y) (site m):
+    ``cell_m`` cells with bands ``weh_wt_pct`` (each cell's pooled counts inverted,
+    :func:`summed_weh`; published -- finite -- only where the cell's ``footprint_share``
+    is at least ``min_share``), ``weh_sigma_wt_pct`` (its Poisson standard deviation,
+    where published) and ``footprint_share`` (-: the time-weighted mean over the cell's
+    records of the share of each record's detector response that comes from inside the
+    cell, :func:`~lunar_drake.science.nss.footprint_share`, at the ground's placing), and
+    the records per cell in ``count``. None without a finite record."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    sec = np.asarray(seconds, np.float64)
+    ok = np.isfinite(x) & np.isfinite(y)
+    share = np.full(x.shape, np.nan)
+    i, j = np.floor(x[ok] / cell_m), np.floor(y[ok] / cell_m)
+    share[ok] = footprint_share(x[ok], y[ok], x_west_m=i * cell_m, y_south_m=j * cell_m,
+                                cell_m=cell_m, config=config)  # fmt: skip
+    grid = grid_records(x, y, np.stack([np.asarray(epithermal, np.float64), sec, share * sec],
+                                       axis=1), cell_m=cell_m)  # fmt: skip
+    if grid is None:
+        return None
+    w, sd = summed_weh(grid.total[0], grid.total[1], config=config)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sh = np.where(grid.count > 0, grid.total[2] / grid.total[1], np.nan)
+    pub = (grid.count > 0) & (sh >= min_share)
+    mean = np.stack([np.where(pub, w, np.nan), np.where(pub, sd, np.nan), sh])
+    return dc.replace(grid, mean=mean)
+
+
 #: Per instrument: (file stem, band names, value unit, the band shown in the PNG). Each
 #: GeoTIFF also ends with a ``records`` band (records per cell).
 MAPS = {
-    "nss": ("nss_map", ("weh_wt_pct", "weh_sigma_wt_pct"), "hydrogen (wt% WEH)", 0),
+    "nss": ("nss_map", ("weh_wt_pct", "weh_sigma_wt_pct", "footprint_share"),
+            "hydrogen (wt% WEH)", 0),
     "nirvss": ("nirvss_map", None, "band depth (-)", 1),
     "lcs": ("lcs_map", ("temperature_K",), "surface temperature (K, LCS)", 0),
 }
 
 
-def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> list:
-    """The ground's maps of each instrument along the path, from the records it
-    received placed at the downlinked on-board estimate (VO corrected with the run's
-    keyframes, :func:`ground_xy`): ``<stem>.png`` (over the site
-    hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
-    one band per quantity, NaN where no record fell, then ``records``, the records per
-    cell). NSS: water-equivalent hydrogen of each cell's pooled counts
-    (:func:`summed_weh`) and its Poisson standard deviation; NIRVSS: every band (the PNG
-    shows OH); LCS: temperature. Returns the paths."""
-    from pathlib import Path
-
-    from lunar_drake.science.nirvss import BANDS
-
-    out = Path(out_dir)
+def instrument_records(science_received, *, scenario, keyframes=()) -> dict:
+    """The received records of each instrument where the ground puts its footprint (the
+    downlinked on-board estimate, VO corrected with ``keyframes``, :func:`ground_pose`;
+    the footprint ``x_m`` ahead along the ground's heading): ``{name: (x, y, values)}``
+    (site m) for ``nss`` (values: epithermal counts, seconds), ``nirvss`` (the band
+    depths) and ``lcs`` (K), each present only when records arrived."""
     recs = {}
-    keyframes = getattr(logs, "keyframes", None) or ()
-    nss = nss_table(logs.science_received, config=scenario.sensors.nss, keyframes=keyframes)
-    if len(nss):  # each record where the ground puts the instrument's footprint
+    nss = nss_table(science_received, config=scenario.sensors.nss, keyframes=keyframes)
+    if len(nss):
         recs["nss"] = (*ahead(nss.x_m, nss.y_m, nss.yaw_rad, scenario.sensors.nss.x_m),
                        np.stack([nss.epithermal, nss.integration_s], axis=1))  # fmt: skip
-    nir = [r for _t, r in logs.science_received if r.instrument == "nirvss"]
+    nir = [r for _t, r in science_received if r.instrument == "nirvss"]
     if nir:
         nx, ny, nyaw = ground_pose([r.t_sample_s for r in nir],
                                    *([r.pose_estimate[i] for r in nir] for i in (0, 1, 5)),
@@ -245,15 +272,40 @@ def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> 
         vals = np.array([r.values for r in nir])
         recs["nirvss"] = (nx, ny, vals[:, :-1])
         recs["lcs"] = (nx, ny, vals[:, -1])
+    return recs
+
+
+def instrument_grid(name: str, x, y, values, *, scenario, cell_m: float = 2.0) -> Grid | None:
+    """The ground's map of instrument ``name`` from :func:`instrument_records`' entry:
+    NSS by :func:`nss_grid`, the others each cell's mean (:func:`grid_records`)."""
+    if name == "nss":
+        v = np.asarray(values)
+        return nss_grid(x, y, v[:, 0], v[:, 1], config=scenario.sensors.nss, cell_m=cell_m)
+    return grid_records(x, y, values, cell_m=cell_m)
+
+
+def science_maps(out_dir, *, scenario, logs, site=None, cell_m: float = 2.0) -> list:
+    """The ground's maps of each instrument along the path, from the records it
+    received placed at the downlinked on-board estimate (VO corrected with the run's
+    keyframes: :func:`instrument_records`): ``<stem>.png`` (over the site
+    hillshade when ``site`` is given) and, with ``site``, ``<stem>.tif`` (the site's CRS,
+    one band per quantity, NaN where no record fell, then ``records``, the records per
+    cell). NSS (:func:`nss_grid`): water-equivalent hydrogen of each cell's pooled
+    counts and its Poisson standard deviation, published only where most of the cell's
+    detector response came from the cell itself, and that share; NIRVSS: every band
+    (the PNG shows OH); LCS: temperature. Returns the paths."""
+    from pathlib import Path
+
+    from lunar_drake.science.nirvss import BANDS
+
+    out = Path(out_dir)
+    recs = instrument_records(logs.science_received, scenario=scenario,
+                              keyframes=getattr(logs, "keyframes", None) or ())  # fmt: skip
     paths = []
     for name, (x, y, v) in recs.items():
-        grid = grid_records(x, y, v, cell_m=cell_m)
+        grid = instrument_grid(name, x, y, v, scenario=scenario, cell_m=cell_m)
         if grid is None:
             continue
-        if name == "nss":  # each cell's pooled counts, inverted, and their sigma
-            w, sd = summed_weh(grid.total[0], grid.total[1], config=scenario.sensors.nss)
-            empty = grid.count == 0
-            grid = dc.replace(grid, mean=np.stack([w, np.where(empty, np.nan, sd)]))
         stem, bands, unit, shown = MAPS[name]
         bands = tuple(f"bd_{b}" for b in BANDS) if bands is None else bands
         _map_png(out / f"{stem}.png", grid, band=shown, x=x, y=y, site=site,
@@ -318,6 +370,7 @@ def _map_png(path, grid: Grid, *, band: int, x, y, site, title: str, unit: str) 
 
 __all__ = [
     "MAPS",
+    "MIN_FOOTPRINT_SHARE",
     "Grid",
     "NSSTable",
     "ahead",
@@ -325,6 +378,9 @@ __all__ = [
     "grid_records",
     "ground_pose",
     "ground_xy",
+    "instrument_grid",
+    "instrument_records",
+    "nss_grid",
     "nss_table",
     "nss_truth",
     "science_maps",
