@@ -68,9 +68,13 @@ def test_cell_means_match_a_quadrature_of_the_world_column():
         got = cell_means(got_col, x0_m=hm.x0_m, y1_m=hm.y1_m, resolution_m=hm.resolution_m,
                          x_west_m=[xw], y_south_m=[ys], cell_m=cell)[0]  # fmt: skip
         assert got == pytest.approx(ref, rel=2e-3), (xw, ys, cell)
-    with pytest.raises(OutOfBoundsError, match=r"cell at \(5, 0\) m .*not wholly on"):
+    # Across the grid's east edge (x = 6 m): the mean of its part on the grid.
+    part = cell_means(got_col, x0_m=hm.x0_m, y1_m=hm.y1_m, resolution_m=hm.resolution_m,
+                      x_west_m=[5.0], y_south_m=[0.0], cell_m=2.0)[0]  # fmt: skip
+    assert part == pytest.approx(col[40:60, 110:120].mean(), rel=1e-9)
+    with pytest.raises(OutOfBoundsError, match=r"cell at \(7, 0\) m .*off the world"):
         cell_means(got_col, x0_m=hm.x0_m, y1_m=hm.y1_m, resolution_m=hm.resolution_m,
-                   x_west_m=[5.0], y_south_m=[0.0], cell_m=2.0)  # fmt: skip
+                   x_west_m=[7.0], y_south_m=[0.0], cell_m=2.0)  # fmt: skip
 
 
 def test_agreement_counts_only_finite_pairs():
@@ -145,7 +149,7 @@ def test_the_nss_map_is_scored_against_the_world_over_the_cells_it_publishes():
     grid = nss_grid(xd, yd, counts, sec, config=cfg)
     published = np.isfinite(grid.mean[0])
     share = grid.mean[2]
-    # Published exactly where more than half of the response came from the cell itself:
+    # Published exactly where at least half of the response came from the cell itself:
     # the middle lane's cells (about 0.67) are, the edge lane's (about 0.5 at 0.1 m from
     # the edge, below half nearer it) mostly not.
     assert np.array_equal(published, (grid.count > 0) & (share >= 0.5))

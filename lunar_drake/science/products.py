@@ -209,7 +209,7 @@ def grid_records(x, y, values, *, cell_m: float, margin_cells: int = 2) -> Grid 
 
 
 #: The share of a cell's detector response that must come from inside the cell for the
-#: NSS map to publish it (:func:`nss_grid`): more than half of what it measured.
+#: NSS map to publish it (:func:`nss_grid`): at least half of what it measured.
 MIN_FOOTPRINT_SHARE = 0.5
 
 

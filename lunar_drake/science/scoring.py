@@ -33,8 +33,8 @@ def cell_means(layer, *, x0_m: float, y1_m: float, resolution_m: float, x_west_m
     """The mean of ``layer`` (rows, cols; row 0 north, west edge ``x0_m``, north edge
     ``y1_m``, pixels of ``resolution_m``; site m) over each square cell ``[x_west,
     x_west + cell_m) x [y_south, y_south + cell_m)`` (site m), every pixel weighted by
-    the area it shares with the cell. Raises OutOfBoundsError for a cell not wholly on
-    the layer's grid."""
+    the area it shares with the cell (a cell across the grid's edge: over its part on
+    the grid). Raises OutOfBoundsError for a cell wholly off the grid."""
     a = np.asarray(layer)
     rows, cols = a.shape
     xw = np.atleast_1d(np.asarray(x_west_m, np.float64))
@@ -44,13 +44,13 @@ def cell_means(layer, *, x0_m: float, y1_m: float, resolution_m: float, x_west_m
     for k, (x, y) in enumerate(zip(xw, ys, strict=True)):
         u0 = (x - x0_m) / resolution_m
         v0 = (y1_m - y - cell_m) / resolution_m
-        if u0 < -1e-9 or v0 < -1e-9 or u0 + n > cols + 1e-9 or v0 + n > rows + 1e-9:
-            raise OutOfBoundsError(
-                f"cell at ({x:g}, {y:g}) m ({cell_m:g} m) is not wholly on the world model's "
-                f"grid (x from {x0_m:g} m, y up to {y1_m:g} m, {cols} x {rows} px)"
-            )
         c0, wx = _overlap(u0, u0 + n, cols)
         r0, wy = _overlap(v0, v0 + n, rows)
+        if not wx.size or not wy.size:
+            raise OutOfBoundsError(
+                f"cell at ({x:g}, {y:g}) m ({cell_m:g} m) lies off the world model's grid "
+                f"(x from {x0_m:g} m, y up to {y1_m:g} m, {cols} x {rows} px)"
+            )
         block = a[r0:r0 + wy.size, c0:c0 + wx.size].astype(np.float64)
         out[k] = float(wy @ block @ wx) / float(wy.sum() * wx.sum())
     return out
