@@ -152,12 +152,20 @@ def test_goals_are_emptied_of_the_unused_route_and_the_dump_reproduces():
     assert len(r.ground.route) == 4
 
 
-def test_reloaded_resolved_scenario_dumps_the_same_bytes(tmp_path):
+def test_reloaded_resolved_scenario_dumps_the_same_bytes(tmp_path, capsys):
     s, _ = resolve_run_scenario(_run_args(scenario="goto"))
     f = tmp_path / "scenario.yaml"
     f.write_text(dump_scenario(s))
     t, _ = resolve_run_scenario(_run_args(scenario=str(f)))
     assert dump_scenario(t) == f.read_text()
+    # `scenarios` on a run's scenario.yaml: one bare scenario, its facts.
+    assert main(["scenarios", str(f)]) == 0
+    cams = "cameras" if s.sensors.camera.enabled else "no cameras"
+    facts = f"{s.simulation_duration:g} s, 1 goal on the {s.ground.map.source} map, {cams}"
+    assert (
+        capsys.readouterr().out
+        == f"{f} holds one bare scenario (a run's scenario.yaml) [{facts}]\n"
+    )
 
 
 def test_goal_line_names_the_goal_not_reached():
@@ -176,3 +184,16 @@ def test_goal_line_names_the_goal_not_reached():
     assert describe_goals(goals) == (
         "Goals: 3 of 3 reached (truth; at the end the rover was 0.31 m from the last)"
     )
+
+
+def test_the_oracle_map_is_announced():
+    from lunar_drake.cli.run import map_line
+
+    truth, _ = resolve_run_scenario(
+        _run_args(scenario="goto", scenario_text="{ground: {map: {source: truth}}}")
+    )
+    assert "planning on the TRUE map (oracle)" in map_line(truth)
+    orbital, _ = resolve_run_scenario(
+        _run_args(scenario="goto", scenario_text="{ground: {map: {source: orbital}}}")
+    )
+    assert map_line(orbital) is None
