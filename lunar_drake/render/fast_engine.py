@@ -477,14 +477,24 @@ def _shade_terrain(
             xc = (CF[j] - cx) / fx
             yc = (row - cy) / fy
             TT[j] = TT[j] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
-        for j in range(n):
-            i = base + col_of[j]
-            sun_out[i] = SUN[j]
-            other_out[i] = OTH[j]
-            rad_out[i] = SUN[j] + OTH[j]
-            label_out[i] = 1
-            depth_out[i] = TT[j]
-            cand_out[i] = CU[j]
+        if n > 0 and col_of[n - 1] - col_of[0] == n - 1:  # one run of columns: vector stores
+            b0 = base + col_of[0]
+            for j in range(n):
+                sun_out[b0 + j] = SUN[j]
+                other_out[b0 + j] = OTH[j]
+                rad_out[b0 + j] = SUN[j] + OTH[j]
+                label_out[b0 + j] = 1
+                depth_out[b0 + j] = TT[j]
+                cand_out[b0 + j] = CU[j]
+        else:
+            for j in range(n):
+                i = base + col_of[j]
+                sun_out[i] = SUN[j]
+                other_out[i] = OTH[j]
+                rad_out[i] = SUN[j] + OTH[j]
+                label_out[i] = 1
+                depth_out[i] = TT[j]
+                cand_out[i] = CU[j]
 
 
 def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.0):

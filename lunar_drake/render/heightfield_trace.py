@@ -282,7 +282,7 @@ def _distance_steps(d_max, base_step, res0, pix, nlev):
     return ds, lv
 
 
-_GROUP = 16  # profile bins marched side by side
+_GROUP = 32  # profile bins marched side by side (16: 10-15 % slower on AMD Zen 3)
 
 
 @numba.njit(cache=True, inline="always")
