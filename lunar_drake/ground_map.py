@@ -4,9 +4,9 @@ The ground's final costmap around the traverse (grey: cost per metre of free cel
 orange: the a-priori map's hazards, inflated by the rover's footprint; red: the hazards
 its stereo found, inflated; purple: the orbital map's steep cells stereo has not yet
 seen, lethal until it does), the rover's true path (black on white), the ground's own
-pose estimate (cyan, dashed, drawn over the truth; VO-corrected when its perception
-runs), its stereo keyframes (green: VO fused, gold: gated, black x: rejected) and the
-goals (blue stars), with the legend beside the map. Without ground perception (no
+pose estimate (magenta, dashed, drawn over the truth; VO-corrected when its perception
+runs), its stereo keyframes (hollow; green: VO fused, gold: gated, blue x: rejected)
+and the goals (blue stars), with the legend beside the map. Without ground perception (no
 cameras) the map is the a-priori one. Matplotlib without pyplot (no backend forced on
 the caller); the PNG carries no software tag, so the same run gives the same bytes.
 """
@@ -19,8 +19,8 @@ import numpy as np
 
 from lunar_drake.files import atomic_path
 
-#: Keyframe markers by VO outcome: (marker, colour).
-VO_MARKERS = {"accepted": ("o", "tab:green"), "gated": ("s", "gold"), "rejected": ("x", "black")}
+#: Keyframe markers (hollow) by VO outcome: (marker, colour).
+VO_MARKERS = {"accepted": ("o", "tab:green"), "gated": ("s", "gold"), "rejected": ("x", "blue")}
 #: Hazard colours: the a-priori map's, stereo's, and unconfirmed steep orbital cells.
 MAP_HAZARD = "tab:orange"
 STEREO_HAZARD = "red"
@@ -102,20 +102,20 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
             handles.append(Patch(facecolor=colour, alpha=alpha, label=label))
     # The truth wide (black on a white halo), the estimate thin and dashed over it: both
     # show where they coincide.
-    ax.plot(truth[:, 0], truth[:, 1], color="white", lw=4.0, zorder=3)
-    (line,) = ax.plot(truth[:, 0], truth[:, 1], color="black", lw=2.0, zorder=3,
+    ax.plot(truth[:, 0], truth[:, 1], color="white", lw=4.5, zorder=3)
+    (line,) = ax.plot(truth[:, 0], truth[:, 1], color="black", lw=2.5, zorder=3,
                       label="true path")  # fmt: skip
     handles.insert(0, line)
     if len(est_xy):
-        (line,) = ax.plot(est_xy[:, 0], est_xy[:, 1], color="tab:cyan", lw=1.3,
-                          ls=(0, (4, 2)), zorder=5, label="ground's estimate")  # fmt: skip
+        (line,) = ax.plot(est_xy[:, 0], est_xy[:, 1], color="magenta", lw=1.4,
+                          ls=(0, (3, 2)), zorder=5, label="ground's estimate")  # fmt: skip
         handles.insert(1, line)
     for kind, (marker, colour) in VO_MARKERS.items():
         k = [(r.x_m, r.y_m) for r in logs.keyframes if r.vo == kind]
         if k:
             k = np.array(k)
-            (m,) = ax.plot(k[:, 0], k[:, 1], marker, ms=4, color=colour, mec="black",
-                           mew=0.5, ls="none", zorder=4, label=f"keyframe: VO {kind}")  # fmt: skip
+            (m,) = ax.plot(k[:, 0], k[:, 1], marker, ms=5, mfc="none", mec=colour,
+                           mew=1.2, ls="none", zorder=4, label=f"keyframe: VO {kind}")  # fmt: skip
             handles.append(m)
     if len(goals):
         (g,) = ax.plot(goals[:, 0], goals[:, 1], "*", ms=14, color="tab:blue", mec="white",
