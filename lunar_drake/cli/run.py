@@ -60,8 +60,9 @@ def _minutes(lo: float, hi: float) -> str:
 
 
 def describe_estimate(scenario, *, meshcat: bool, out: Path) -> str:
-    """The line printed before a run: simulated time, cameras, the estimated wall time
-    and disk use, and, for a long or large run, where to start instead."""
+    """What is printed before a run: simulated time, cameras, the estimated wall time
+    and disk use, and, for a long or large run, a second line on where to start
+    instead."""
     e = run_estimate(scenario, meshcat=meshcat)
     cam = scenario.sensors.camera.enabled
     parts = []
@@ -78,7 +79,7 @@ def describe_estimate(scenario, *, meshcat: bool, out: Path) -> str:
     )
     if e["minutes"][1] > 3.0 or e["total_bytes"] > 50e6:
         text += (
-            " For a first look: --scenario small (seconds); --no-cameras and --no-meshcat "
+            "\nFor a first look: --scenario small (seconds); --no-cameras and --no-meshcat "
             "make any run faster and smaller."
         )
     return text
