@@ -19,11 +19,11 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
+from lunar_drake.dynamics import contact_kernels as ck
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import (
     FootprintSampling,
     belly_penetration,
-    cross_rows,
     wheel_contact_geometry,
 )
 from lunar_drake.terrain.heightfield import Heightfield
@@ -116,6 +116,8 @@ class WheelRegolithContact(LeafSystem):
     Simulator applies before discrete updates; so the patch update sees the plant's new
     state (a semi-implicit step of ``j``) and evaluates the kinematics that the next
     step's forces reuse, and only the cheap second stage is redone for the new ``j``.
+    Both stages and the patch update are compiled
+    (:mod:`lunar_drake.dynamics.contact_kernels`: terramechanics' formulas, one call each).
 
     The soil is an abstract *parameter* (default: the ``soil`` argument), so a Context
     may carry another soil without rebuilding the diagram (:meth:`get_soil`,
@@ -184,6 +186,7 @@ class WheelRegolithContact(LeafSystem):
             self._force_buffer.append(e)
         n = len(self._wheels)
         self._n = n
+        self._memo = None  # (soil, kernel parameters) of the last soil seen
         self._soil_index = self.DeclareAbstractParameter(AbstractValue.Make(soil))
         self._patch_index = self.DeclareDiscreteState(2 * n)
         self.DeclarePeriodicDiscreteUpdateEvent(
@@ -278,12 +281,12 @@ class WheelRegolithContact(LeafSystem):
         hf = self.heightfield_input.Eval(context)
         soil = self.get_soil(context)
         w = self._wheel
-        X = [poses[i] for i in self._wheels]
-        p = np.array([x.translation() for x in X])
-        axle = np.array([x.rotation().col(1) for x in X])
-        V = [vels[i] for i in self._wheels]
-        v = np.array([x.translational() for x in V])
-        wv = np.array([x.rotational() for x in V])
+        X = np.array([poses[i].GetAsMatrix34() for i in self._wheels])  # (n, 3, 4)
+        p = np.ascontiguousarray(X[:, :, 3])
+        axle = np.ascontiguousarray(X[:, :, 1])  # the wheel body's +y
+        V = np.array([vels[i].get_coeffs() for i in self._wheels])  # (n, 6): [w, v]
+        v = np.ascontiguousarray(V[:, 3:])
+        wv = np.ascontiguousarray(V[:, :3])
         g = wheel_contact_geometry(
             heightfield=hf,
             p_WWo=p,
@@ -293,36 +296,11 @@ class WheelRegolithContact(LeafSystem):
             sampling=self._sampling,
         )
         on = ~g.off_terrain
-        z = np.where(on, np.minimum(np.maximum(g.sinkage, -1.0), w.radius_m), -1.0)
-        v_x = np.einsum("ij,ij->i", v, g.forward_W)
-        v_y = np.einsum("ij,ij->i", v, g.lateral_W)
-        z_dot = -np.einsum("ij,ij->i", v, g.n_W)
-        # Absolute spin about the axle: the rim's slip against the ground does not care
-        # which body the wheel hangs from (a pitching rocker must not look like slip).
-        spin = np.einsum("ij,ij->i", wv, axle)
-        omega_r = spin * w.radius_m
-        slip = tm.slip_ratio(omega_r=omega_r, v=v_x, v_eps=self._v_eps)
-        beta = tm.slip_angle(v_x=v_x, v_y=v_y, v_eps=self._v_eps)
-        # One Wong-Reece evaluation: the vertical load the stresses carry at this sinkage
-        # and slip (the normal force, plus damping) and the tangential forces.
-        f = tm.wheel_forces(
-            slip=slip,
-            slip_angle=beta,
-            z=z,
-            wheel=w,
-            soil=soil,
-            # The soil is compacted by a wheel that translates or spins (digging in when
-            # immobilized): the model follows v + r omega, mirrored when it reverses and
-            # faded out near rest.
-            direction=tm.travel_direction(v_x + omega_r, v_eps=self._dir_eps),
-        )
-        N = tm.normal_force(z, z_dot, vertical=f.vertical, wheel=w, soil=soil) * on
-        # Static patch weight: 1 for a wheel that does not roll, 0 at driving speeds (exactly).
-        ws = tm.static_weight(omega_r, patch=self._patch)
-        dynamic = (f.drawbar_pull, f.lateral, -f.torque)
-        state = np.stack(
-            [np.where(on, g.sinkage, 0.0), N, slip, beta, np.zeros(self._n), (~on).astype(float)],
-            axis=1,
+        # Slip, the Wong-Reece forces, the damped normal force, the static weight and the
+        # patch length in one compiled call (terramechanics' formulas).
+        par, const = self._constants(soil)
+        state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil = ck.kinematics(
+            v, wv, axle, g.sinkage, g.n_W, g.forward_W, g.lateral_W, on, par, const
         )
         belly = None
         off = bool((~on).any())
@@ -355,47 +333,36 @@ class WheelRegolithContact(LeafSystem):
             on=on,
             state=state,
             N=N,
-            slip_velocity=tm.patch_slip_velocity(v_x=v_x, v_y=v_y, omega_r=omega_r),
+            slip_velocity=slip_velocity,
             rolling_speed=omega_r,
-            patch_length=tm.patch_length(z, wheel=w, soil=soil),  # 0 out of contact (z = -1)
+            patch_length=length,  # 0 out of contact
             static_weight=ws,
-            dynamic=dynamic,
+            dynamic=(fx, fy, m_soil),
             belly=belly,
             off=off,
         )
 
+    def _constants(self, soil: tm.SoilParams):
+        """The compiled kernels' parameters of ``soil`` (remembered for the last soil
+        seen: a pure function of it, not state)."""
+        memo = self._memo
+        if memo is None or memo[0] is not soil:
+            memo = self._memo = (soil, *ck.soil_constants(
+                wheel=self._wheel, soil=soil, patch=self._patch, v_eps=self._v_eps,
+                direction_eps=self._dir_eps))  # fmt: skip
+        return memo[1], memo[2]
+
     def _compute(self, context) -> _Contact:
         k = self._kinematics.Eval(context)
         fx, fy, m_soil = k.dynamic
-        ws = k.static_weight
-        if ws.max() > 0.0:
-            j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
-            fs = tm.patch_static_force(
-                j,
-                slip_velocity=k.slip_velocity,
-                N=k.N,
-                length=k.patch_length,
-                wheel=self._wheel,
-                soil=self.get_soil(context),
-                damping_ratio=self._patch.damping_ratio,
-            )
-            # The patch force acts at the rim: its moment about the axle is the lever arm's.
-            Fs = fs[:, :1] * k.forward_W + fs[:, 1:] * k.lateral_W
-            m_static = np.einsum("ij,ij->i", cross_rows(k.r_c, Fs), k.axle)
-            wd = 1.0 - ws
-            fx = ws * fs[:, 0] + wd * fx
-            fy = ws * fs[:, 1] + wd * fy
-            m_soil = ws * m_static + wd * m_soil
-        on = k.on
-        F = k.N[:, None] * k.n_W + fx[:, None] * k.forward_W + fy[:, None] * k.lateral_W
-        F *= on[:, None]
-        # Moment about the centre of F at the contact point, corrected so its axle
-        # component is the soil moment (Wong-Reece: -torque) rather than the lever arm.
-        M = cross_rows(k.r_c, F)
-        m_axle = np.einsum("ij,ij->i", M, k.axle)
-        tau = M + ((m_soil * on) - m_axle)[:, None] * k.axle
+        j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
+        const = self._constants(self.get_soil(context))[1]
+        F, tau, drawbar = ck.forces(
+            j, k.N, k.slip_velocity, k.patch_length, k.static_weight, fx, fy, m_soil, k.n_W,
+            k.forward_W, k.lateral_W, k.r_c, k.axle, k.on, const,
+        )  # fmt: skip
         state = k.state.copy()
-        state[:, 4] = fx * on
+        state[:, 4] = drawbar
         return _Contact(F, tau, state, k.belly, k.off)
 
     def _cached(self, context) -> _Contact:
@@ -404,15 +371,9 @@ class WheelRegolithContact(LeafSystem):
     def _update_patch(self, context, discrete_state):
         k = self._kinematics.Eval(context)
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
-        jn = tm.update_patch_displacement(
-            j,
-            slip_velocity=k.slip_velocity,
-            rolling_speed=k.rolling_speed,
-            length=k.patch_length,
-            dt=self._dt,
-            soil=self.get_soil(context),
-            saturation_moduli=self._patch.saturation_moduli,
-        )
+        jn = ck.patch_update(j, k.slip_velocity, k.rolling_speed, k.patch_length, self._dt,
+                             self._constants(self.get_soil(context))[1],
+                             self._patch.saturation_moduli)  # fmt: skip
         discrete_state.get_mutable_vector(self._patch_index).SetFromVector(jn.ravel())
 
     def _calc_forces(self, context, output):
