@@ -9,11 +9,13 @@ Without flags (issue 14): the default mission with the mast stereo pair at
 the image channel, and the ground's stereo, ICP visual odometry, mapping and planner on
 what arrives (``ground.perception``). ``--no-cameras``: cameras off (issue 13). Same
 measurement as :mod:`benchmarks.sim_rate` (``--repeats`` runs of ``--sim-s`` simulated
-seconds from fresh contexts, the median): JSON ``{rtf, runs, speed_index_s, ...}``.
+seconds from fresh contexts after an untimed warm-up run, the median): JSON ``{rtf,
+runs, speed_index_s, ...}``.
 ``--whole``: one whole mission through :func:`lunar_drake.simulation.simulate` (the
 scenario's duration, 700 s for the default; what ``lunar-drake run`` simulates, logging
-included, without writing files): ``rtf`` = simulated / simulating seconds. Goals on
-this 2-core machine (issue 29): rtf >= 2 with stereo, >= 10 without cameras.
+and the renderer's set-up included, without writing files): ``rtf`` = simulated /
+simulating seconds. Goals on this 2-core machine (issue 29): rtf >= 2 with stereo, >= 10
+without cameras.
 """
 
 from __future__ import annotations
@@ -87,6 +89,8 @@ def main(argv=None) -> int:
     p.add_argument("--sim-s", type=float, default=None,
                    help="simulated seconds per run (30 without cameras, 60 with)")  # fmt: skip
     p.add_argument("--repeats", type=int, default=None, help="runs (3 without cameras, 2 with)")
+    p.add_argument("--warmup-s", type=float, default=2.0,
+                   help="simulated seconds of an untimed first run (0: none)")  # fmt: skip
     p.add_argument("--out", default=None)
     a = p.parse_args(argv)
     if a.out:
@@ -105,7 +109,8 @@ def main(argv=None) -> int:
     if a.whole:
         return whole_mission(scenario_name=a.scenario, text=text, goal=goal, out=a.out)
     args = ["--scenario", a.scenario, "--sim-s", str(sim_s), "--repeats", str(repeats),
-            "--scenario-text", text, "--goal", str(goal)]  # fmt: skip
+            "--scenario-text", text, "--goal", str(goal),
+            "--warmup-s", str(a.warmup_s)]  # fmt: skip
     if a.out:
         args += ["--out", a.out, "--rtf-key", "rtf"]
     return sim_rate_main(args)
