@@ -197,3 +197,17 @@ def test_the_oracle_map_is_announced():
         _run_args(scenario="goto", scenario_text="{ground: {map: {source: orbital}}}")
     )
     assert map_line(orbital) is None
+
+
+def test_the_calibration_line_says_when_the_flight_knows_the_true_soil():
+    from lunar_drake.cli.run import calibration_line
+    from lunar_drake.scenario_files import load_scenario
+
+    assert calibration_line(load_scenario(scenario_name="default")) is None  # grc1
+    oracle = load_scenario(scenario_name="default", scenario_text=(
+        "{flight: {estimator: {slip_calibration: lunar_regolith}}}"))  # fmt: skip
+    assert "slip calibrated on the TRUE soil (oracle)" in calibration_line(oracle)
+    # The plant on GRC-1 and the flight calibrated on it: the oracle again.
+    grc = load_scenario(scenario_name="default", scenario_text="{soil: {name: grc1, c: 100.0, "
+                        "phi: 0.5759586531581288, K: 0.015, K_y: 0.015, density: 1700.0}}")
+    assert calibration_line(grc) is not None

@@ -166,6 +166,19 @@ def map_line(scenario) -> str | None:
             "mission has only the orbital map")  # fmt: skip
 
 
+def calibration_line(scenario) -> str | None:
+    """The console line of the flight's slip calibration when it is the plant's own soil
+    (an oracle)."""
+    from lunar_drake.preflight import slip_calibration
+
+    cal = slip_calibration(scenario)
+    if cal is None or not cal.is_soil(scenario.soil):
+        return None
+    return (f"Flight: slip calibrated on the TRUE soil (oracle): "
+            f"flight.estimator.slip_calibration {cal.spec!r} is the plant's soil; a real "
+            "mission calibrates on a simulant before launch")  # fmt: skip
+
+
 def command(args) -> int:
     from lunar_drake import metrics, outputs
     from lunar_drake.files import check_replaceable, staged_directory
@@ -177,8 +190,9 @@ def command(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / (scenario.name or name)
     check_replaceable(out, allowed=outputs.RUN_DIR_NAMES, what="run directory")
     print(describe_estimate(scenario, meshcat=not args.no_meshcat, out=out), flush=True)
-    if line := map_line(scenario):
-        print(line, flush=True)
+    for line in (map_line(scenario), calibration_line(scenario)):
+        if line:
+            print(line, flush=True)
     meshcat = None
     if not args.no_meshcat:
         from pydrake.geometry import Meshcat, MeshcatParams
