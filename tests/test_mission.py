@@ -182,4 +182,7 @@ def test_default_rover_drives_100_m_over_the_default_site(cache):
     drift = summary["localization"]["final_position_error_m"]
     assert all(g.get("final_distance_m", g["closest_m"]) < drift + 1.0 for g in summary["goals"])
     assert drift < 0.05 * rv["distance_m"]
+    # The estimate's sigma means something: the horizontal position NEES over the run
+    # (2 when consistent; 0.46 with the earlier, 4x too wide slip sigma; 2.7 measured)
+    assert 0.5 < summary["localization"]["position_nees"]["mean"] < 4.0
     assert summary["hazards"]["strikes"] == 0 and summary["modes"]["safings"] == {}
