@@ -116,18 +116,24 @@ def lut_cell_f32(table, x, y, cg):
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def lut_reflectance_at_f32(table, x, y, cg):
-    """:func:`lut_reflectance_at` in float32 arithmetic (``x``, ``y``, ``cg`` float32;
-    results within ~1e-6 relative of the float64 form): :func:`lut_cell_f32`, then the
-    eight corners blended by :func:`trilerp`."""
-    k, fx, fy, fz = lut_cell_f32(table, x, y, cg)
-    s1 = np.int32(table.shape[2])
-    s0 = np.int32(table.shape[1]) * s1
-    f = table.reshape(table.size)
-    return trilerp(
-        f[k], f[k + 1], f[k + s1], f[k + s1 + 1],
-        f[k + s0], f[k + s0 + 1], f[k + s0 + s1], f[k + s0 + s1 + 1],
-        fx, fy, fz,
-    )  # fmt: skip
+    """:func:`lut_reflectance_at` in float32 arithmetic (``x``, ``y``, ``cg`` float32):
+    the form a compiled loop vectorizes eight pixels wide where the CPU has fast
+    gathers, table reads included (results within ~1e-6 relative of the float64 form);
+    :func:`lut_cell_f32` and :func:`trilerp` are the same arithmetic in two halves."""
+    ni = table.shape[0] - 1
+    ne = table.shape[1] - 1
+    ng = table.shape[2] - 1
+    one = np.float32(1.0)
+    h = np.float32(0.5) * (one - cg)
+    h = min(max(h, np.float32(0.0)), one)
+    z = np.float32(math.sqrt(np.float32(math.sqrt(h)))) * np.float32(ng)
+    i0 = min(int(x), ni - 1)
+    j0 = min(int(y), ne - 1)
+    k0 = min(int(z), ng - 1)
+    fx = x - np.float32(i0)
+    fy = y - np.float32(j0)
+    fz = z - np.float32(k0)
+    return _trilinear(table, i0, j0, k0, fx, fy, fz)
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")

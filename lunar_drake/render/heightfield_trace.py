@@ -295,8 +295,8 @@ def _level(offs, hs, ws, cxs, cys, lev):
 def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend):
     """AZ[k, b] = (running max of the elevation slope, terrain height) along bin b.
 
-    Bins go in groups of ``_GROUP`` side by side (neighbouring DEM cells, one cache
-    line of AZ per step)."""
+    Bins go in groups of ``_GROUP`` side by side (neighbouring DEM cells, a few cache
+    lines of AZ per step)."""
     data, offs, hs, ws, cxs, cys, left, top = packed
     K = ds.size
     G = _GROUP

@@ -39,8 +39,10 @@ shimmers. The footprint is ``distance * pixel_angle / sqrt(max(cos_e, 0.05))``: 
 distance over the focal length in pixels, stretched by the geometric mean of the
 foreshortening (a footprint on grazing ground is ``1 / cos_e`` longer along the view).
 
-:func:`sample_octave` (numba, ``inline="always"``) is the one-octave sampler of the
-fast engine's shading kernel; :func:`sample_texture_nb` sums the octaves per point
+:func:`sample_octave` (numba, ``inline="always"``) is the one-octave sampler; the fast
+engine's shading kernel runs its halves, :func:`octave_cell` and :func:`octave_blend`, in
+loops of their own with the two table reads in between (vector code on CPUs without
+fast gathers); :func:`sample_texture_nb` sums the octaves per point
 (numba) and :func:`sample_texture` is the numpy version of the reference engine (the
 same float32 operations in the same order).
 """

@@ -25,7 +25,7 @@ cells, C1, reproduces linear functions; edge cells replicated as in
   light at its centre instead of 0.
 
 :func:`soft_lightmap_at` is the per-point numba sampler; the fast engine's kernel runs
-the same arithmetic in two row passes (cells and weights, then the taps);
+the same arithmetic in three row passes (cells and weights, the nine reads, the taps);
 :func:`soft_lightmap` is the numpy version for the reference engine.
 """
 
