@@ -98,8 +98,9 @@ def test_bad_goals_are_one_line_errors_and_write_nothing(cache, tmp_path, capsys
 
     out = tmp_path / "run"
     args = ["run", "--scenario", "goto", "--no-meshcat", "--no-progress", "--out", str(out)]
+    # The rock at (8, 6) is under the orbital map's 2 m limit: only the true map has it.
     text = (
-        f"{{ground: {{goals: [{goal}]}}}}" if goal
+        f"{{ground: {{goals: [{goal}], map: {{source: truth}}}}}}" if goal
         else "{ground: {actions: [{t_s: 5, action: goal, x_m: 500, y_m: 0}]}}"
     )  # fmt: skip
     assert main([*args, "--scenario-text", text]) == 2
