@@ -1,5 +1,6 @@
 """On-board pose estimator: an error-state extended Kalman filter (the flight software's
-robot_localization analog). Pure numpy; no Drake.
+robot_localization analog). numpy, with the per-tick steps compiled
+(:mod:`lunar_drake.autonomy.ekf_kernels`); no Drake.
 
 Nominal state ``x`` (15,): position ``p_WB`` (m, site frame; z relative to the start),
 attitude ``q_WB`` (w, x, y, z), gyro bias ``b_g`` (rad/s, body), the odometry slip
