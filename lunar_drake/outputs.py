@@ -52,6 +52,12 @@ LOG_FILES = {
 
 
 #: Everything a run directory may hold (a rerun may replace a directory holding only these).
+#: The science files a run writes when its instruments are on.
+SCIENCE_FILES = (
+    "nss.csv", "nss_map.png", "nss_map.tif", "nirvss.csv", "nirvss_map.png", "nirvss_map.tif",
+    "lcs.csv", "lcs_map.png", "lcs_map.tif", "drill.csv",
+)
+
 RUN_DIR_NAMES = frozenset(
     [
         "scenario.yaml",
@@ -64,16 +70,7 @@ RUN_DIR_NAMES = frozenset(
         "ground_events.csv",
         "images.csv",
         "keyframes.csv",
-        "nss.csv",
-        "nss_map.png",
-        "nss_map.tif",
-        "nirvss.csv",
-        "nirvss_map.png",
-        "nirvss_map.tif",
-        "lcs.csv",
-        "lcs_map.png",
-        "lcs_map.tif",
-        "drill.csv",
+        *SCIENCE_FILES,
         "ground_map.png",
         "calibration.yaml",
         "frames",

@@ -325,18 +325,7 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
     from lunar_drake import outputs
 
     files = outputs.run_files()
-    for name in (
-        "nss.csv",
-        "nss_map.png",
-        "nss_map.tif",
-        "nirvss.csv",
-        "nirvss_map.png",
-        "nirvss_map.tif",
-        "lcs.csv",
-        "lcs_map.png",
-        "lcs_map.tif",
-        "drill.csv",
-    ):
+    for name in outputs.SCIENCE_FILES:
         if (out / name).exists():
             files.append(name)
     if per.get("keyframes"):
