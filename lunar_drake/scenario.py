@@ -308,8 +308,10 @@ class GroundConfig:
             estimate and replanning (:mod:`lunar_drake.autonomy.operations`).
         actions: scheduled operator requests (:class:`OperatorAction`).
         goal_tolerance_m: a goal is reached when the true position comes within this
-            distance (m; scoring); the ground judges its own goals done when the
-            downlinked estimate is this close.
+            distance (m; scoring); the ground judges its own goals done when its
+            estimate is this close less its position sigma (at least
+            ``goto_tolerance_m`` + 0.1 m; :func:`~lunar_drake.autonomy.operations.
+            reach_radius_m`), else it plans a final approach.
         goto_tolerance_m: on board, a goto ends when the *estimate* is this close to
             its goal (m); smaller than ``goal_tolerance_m`` so that the estimate's drift
             has room.

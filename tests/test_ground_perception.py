@@ -224,7 +224,8 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
         (0, scene["frame"](0, pose_matrix(true0), true0)),
         (1, scene["frame"](1, pose_matrix(true1), est1)),
     ]
-    cfg = PerceptionConfig(odom_sigma_fraction=0.1, vo_sigma_m=0.01, keyframe_m=0.5)
+    cfg = PerceptionConfig(odom_sigma_fraction=0.1, vo_sigma_m=0.01, keyframe_m=0.5,
+                           vo_scale_sigma=0.0)  # fmt: skip
     st = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
                          config=cfg, **scene["kw"])  # fmt: skip
     first, rec = st.records.items()
@@ -236,6 +237,13 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
     assert first.sigma_m == 0.0
     lo, hi = ((math.hypot(sig_o, slip) ** -2 + 0.01**-2) ** -0.5 for slip in (0.15, 0.25))
     assert lo < rec.sigma_m < hi
+    # VO's scale error adds linearly: vo_scale_sigma of the fused step
+    st_s = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                           config=dc.replace(cfg, vo_scale_sigma=0.05), **scene["kw"])  # fmt: skip
+    step = math.hypot(rec.x_m - first.x_m, rec.y_m - first.y_m)
+    assert st_s.records.items()[-1].sigma_m == pytest.approx(
+        math.hypot(rec.sigma_m, 0.05 * step), rel=0.02)
+    assert st_s.sigma_m == st_s.records.items()[-1].sigma_m
     ground = corrected_pose(est1, planar_correction(st.correction))
     err_ground = math.hypot(ground[0] - 0.8, ground[1])
     assert err_ground < 0.05 < 0.2 == pytest.approx(math.hypot(est1[0] - 0.8, est1[1]))

@@ -24,6 +24,7 @@ from lunar_drake.autonomy.operations import (
     distance_to_path,
     ground_pose,
     operator_step,
+    reach_radius_m,
 )
 from lunar_drake.autonomy.safety import SafetyConfig, bumper_step
 from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS, pack_telemetry
@@ -266,6 +267,26 @@ def test_goals_are_planned_from_the_estimate_judged_on_telemetry_and_replanned()
     assert g.state.status == ("reached", "active") and g.state.replans == 0
     kinds = [e.kind for e in g.state.events.items()]
     assert kinds == ["goal", "goal", "plan", "plan", "goal_reached", "plan"]
+
+
+@pytest.mark.parametrize("sigma, reached", [(0.0, True), (0.2, True), (0.5, False)])
+def test_a_goal_is_judged_with_the_estimates_own_sigma(sigma, reached):
+    """The rover parks with the estimate 0.7 m from the goal: reached while the
+    tolerance (1 m) less the estimate's sigma still covers it, else a final approach
+    from the estimate; the radius never drops below the on-board tolerance + 0.1 m."""
+    p = OperatorParams()
+    assert reach_radius_m(p, sigma) == pytest.approx(max(1.0 - sigma, p.goto_tolerance_m + 0.1))
+    assert reach_radius_m(p, 5.0) == pytest.approx(p.goto_tolerance_m + 0.1)
+    g = Ground()
+    g.tick(0.0, Request("goal", (10.0, 0.0)), sigma_m=sigma)
+    g.telemetry(30.0, xy=(9.3, 0.0), mode="waiting", motion_seq=g.goto_seq())
+    out = g.tick(30.1, sigma_m=sigma)
+    if reached:
+        assert g.state.status == ("reached",) and out == []
+    else:
+        (approach,) = out
+        assert approach.waypoints == ((9.3, 0.0), (10.0, 0.0))
+        assert g.state.status == ("active",) and g.state.replans == 1
 
 
 def test_a_goal_fails_after_max_replans_or_when_the_planner_refuses_it():

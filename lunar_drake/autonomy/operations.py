@@ -9,8 +9,10 @@ returns the commands to send up:
 * **goals** are driven one at a time: the ground plans from its pose estimate to the
   goal on its costmap and sends a goto; when telemetry says the rover finished it (the
   goto acknowledged, the mode ``waiting``), the goal is *reached on the ground* if the
-  downlinked estimate is within ``goal_tolerance_m``, else the ground replans from the
-  estimate (at most ``max_replans`` times, then the goal is ``failed``). While the
+  ground's estimate is within ``goal_tolerance_m`` less its own position sigma (never
+  less than ``goto_tolerance_m`` + 0.1 m: :func:`reach_radius_m`), else the ground
+  replans a final approach from the estimate (at most ``max_replans`` times, then the
+  goal is ``failed``). While the
   rover drives, an estimate more than ``replan_deviation_m`` off the planned path
   makes the ground stop it and replan. A goal added while driving waits its turn.
 * **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
@@ -204,6 +206,16 @@ def goal_shift_limit_m(params) -> float:
     return max(0.0, params.goal_tolerance_m - params.goto_tolerance_m - 0.1)
 
 
+def reach_radius_m(params, sigma_m: float) -> float:
+    """How near (m) the ground's estimate must be to a goal for the ground to call it
+    reached: the scored ``goal_tolerance_m`` less the estimate's own position sigma
+    ``sigma_m`` (m, per axis), so a goal judged reached on an estimate that is one sigma
+    off still is; never less than what the rover can park to (``goto_tolerance_m`` +
+    0.1 m)."""
+    return max(params.goal_tolerance_m - max(float(sigma_m), 0.0),
+               params.goto_tolerance_m + 0.1)  # fmt: skip
+
+
 def onboard_points(points_xy, correction) -> tuple:
     """Points ((x, y), ...) of the ground's frame in the rover's on-board estimate frame:
     the inverse of :func:`corrected_pose`'s map, ``p = Rz(-dyaw) (p' - d)``. A goto's
@@ -238,7 +250,8 @@ def _set(tup: tuple, k: int, v) -> tuple:
 
 def operator_step(state: OperatorState, deliveries, *, now: float, params: OperatorParams,
                   planner, start_pose, requests=(), correction=(0.0, 0.0, 0.0),
-                  map_version: int = 0, blocked=None, preview=None) -> OperatorState:  # fmt: skip
+                  sigma_m: float = 0.0, map_version: int = 0, blocked=None,
+                  preview=None) -> OperatorState:  # fmt: skip
     """One ground tick at ``now`` (s).
 
     ``deliveries``: the downlink telemetry inbox (newest handled once); ``requests``:
@@ -246,7 +259,8 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
     goal_xy)`` returns waypoints ((x, y), ...) or raises a LunarDrakeError (a goal it
     cannot serve fails); ``start_pose`` (x, y, yaw) is the spawn pose, the estimate
     before the first telemetry. ``correction`` (dx, dy, dyaw) moves the downlinked
-    estimate to the ground's own (:func:`corrected_pose`; VO). ``map_version`` and
+    estimate to the ground's own (:func:`corrected_pose`; VO), ``sigma_m`` (m) is that
+    estimate's position sigma (:func:`reach_radius_m`). ``map_version`` and
     ``blocked(path, xy)`` (True when the path from xy now crosses a hazard): when the
     map's version changes while the rover drives a goal, a blocked path is stopped and
     replanned (not counted against ``max_replans``). ``preview(pose, waypoints)``: the
@@ -439,7 +453,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
                     start_next()
         elif acked and mode in ("waiting", "idle"):
             err = math.hypot(pose[0] - goals[active][0], pose[1] - goals[active][1])
-            if err <= params.goal_tolerance_m:
+            if err <= reach_radius_m(params, sigma_m):
                 status = _set(status, active, "reached")
                 note("goal_reached", f"{active}: estimate {err:.2f} m from it")
                 start_next()
@@ -507,4 +521,5 @@ __all__ = [
     "ground_pose",
     "onboard_points",
     "operator_step",
+    "reach_radius_m",
 ]

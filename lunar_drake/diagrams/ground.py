@@ -251,6 +251,7 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
             builder.Connect(perception.costmap_output, operator.costmap_input)
             if g.perception.use_vo:
                 builder.Connect(perception.pose_correction_output, operator.pose_correction_input)
+                builder.Connect(perception.pose_sigma_output, operator.pose_sigma_input)
             builder.ExportOutput(perception.pose_correction_output, "ground.pose_correction")
     if sends_science(scenario):
         science = builder.AddNamedSystem("ground.science", ScienceReceiver(rate_hz=g.rate_hz))

@@ -24,9 +24,10 @@ the on-board pose estimate and the gimbal angles at capture):
   telemetry between keyframes. This is a Kalman update of the relative motion with
   isotropic, constant-shape covariances (no cross-correlations, no attitude update): an
   approximation. The ground's position variance grows by each link's fused variance
-  (``1 / (1 / sigma_odom^2 + 1 / sigma_vo^2)``, or the on-board one alone), so
-  ``sigma_m`` says how far, one sigma per axis, the ground's pose may have wandered
-  since the first keyframe.
+  (``1 / (1 / sigma_odom^2 + 1 / sigma_vo^2)``, or the on-board one alone), and a
+  systematic part, ``vo_scale_sigma`` of each fused step, adds up linearly (a scale
+  error does not average out), so ``sigma_m = sqrt(var + sys^2)`` says how far, one
+  sigma per axis, the ground's pose may have wandered since the first keyframe.
 * **mapping**: the cloud, in the ground's estimated frame, fused into a local
   elevation map (:mod:`~lunar_drake.perception.elevation_map`, a ``window_m`` square
   re-centred on the rover when it nears an edge; what leaves it stays in the costmap);
@@ -78,6 +79,10 @@ class PerceptionConfig:
             error is 1-2 cm (vo-study): the difference is the odometry's (slip).
         vo_sigma_m: VO translation sigma per keyframe link (m; vo-study's straight
             drives: 6-11 cm over 19 links of 1 m).
+        vo_scale_sigma: VO's unmodelled scale error, a fraction of each fused step
+            (its sigma adds linearly over the drive; 0.007: the default mission's VO
+            steps were 0.7 % longer than the true camera steps, median of 59 links,
+            after the symmetric stereo matching).
         vo_gate_sigmas: an accepted alignment whose translation differs from the
             on-board one by more than this many combined sigmas, in a way slip cannot
             explain (:func:`innovation`), is not fused (the innovation gate; recorded
@@ -99,6 +104,7 @@ class PerceptionConfig:
     odom_sigma_fraction: float = 0.05
     odom_sigma_min_m: float = 0.005
     vo_sigma_m: float = 0.015
+    vo_scale_sigma: float = 0.007
     vo_gate_sigmas: float = 3.0
     stereo: StereoConfig = dc.field(default_factory=StereoConfig)
     vo: VoConfig = dc.field(default_factory=lambda: VoConfig(max_rmse_m=0.08))
@@ -116,6 +122,7 @@ class PerceptionConfig:
         check_range("odom_sigma_fraction", self.odom_sigma_fraction, 0.0, 1.0)
         check_range("odom_sigma_min_m", self.odom_sigma_min_m, 1e-6, 10.0, unit=" m")
         check_range("vo_sigma_m", self.vo_sigma_m, 1e-6, 10.0, unit=" m")
+        check_range("vo_scale_sigma", self.vo_scale_sigma, 0.0, 1.0)
         check_range("vo_gate_sigmas", self.vo_gate_sigmas, 0.0, 1e6, lo_open=True)
         self.stereo.validate()
         self.vo.validate()
@@ -167,6 +174,7 @@ class PerceptionState:
     key_X_WC_onboard: np.ndarray | None = None
     key_X_WC_ground: np.ndarray | None = None
     key_var_m2: float = 0.0
+    key_sys_m: float = 0.0
     correction: np.ndarray = dc.field(default_factory=lambda: np.eye(4))
     emap: object = None
     costmap: object = None
@@ -175,6 +183,12 @@ class PerceptionState:
 
     def __deepcopy__(self, memo):
         return self
+
+    @property
+    def sigma_m(self) -> float:
+        """The ground's position sigma (m, per axis) since the first keyframe: the
+        random and the systematic parts (:class:`PerceptionConfig` ``vo_scale_sigma``)."""
+        return math.hypot(math.sqrt(self.key_var_m2), self.key_sys_m)
 
 
 def pose_matrix(pose6) -> np.ndarray:
@@ -319,7 +333,7 @@ def perception_step(
         intensity = res.left_8bit[near].astype(np.float64) / 255.0
         vo, reason, fit, rmse, cond = "none", "", math.nan, math.nan, math.nan
         odom_step = vo_step = diff = math.nan
-        var = s.key_var_m2
+        var, sys_m = s.key_var_m2, s.key_sys_m
         if first:
             X_WC_ground = s.correction @ X_WC_onboard
         else:
@@ -348,6 +362,7 @@ def perception_step(
                                                 sigma_odom_m=sig_slip,
                                                 sigma_vo_m=config.vo_sigma_m)  # fmt: skip
                     step_var = 1.0 / (1.0 / sig_slip**2 + 1.0 / config.vo_sigma_m**2)
+                    sys_m += config.vo_scale_sigma * float(np.linalg.norm(T[:3, 3]))
             else:
                 vo = "off"
             X_WC_ground = s.key_X_WC_ground @ T
@@ -377,13 +392,13 @@ def perception_step(
             vo_step_m=vo_step, vo_minus_odom_m=diff, x_m=float(X_WB_ground[0, 3]),
             y_m=float(X_WB_ground[1, 3]),
             yaw_rad=math.atan2(X_WB_ground[1, 0], X_WB_ground[0, 0]),
-            sigma_m=math.sqrt(var), new_lethal=new_lethal,
+            sigma_m=math.hypot(math.sqrt(var), sys_m), new_lethal=new_lethal,
             **dict(zip(("correction_x_m", "correction_y_m", "correction_yaw_rad"),
                        planar_correction(correction), strict=True)),
         )  # fmt: skip
         s = dc.replace(
             s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,
-            key_X_WC_ground=X_WC_ground, key_var_m2=var, correction=correction, emap=emap,
+            key_X_WC_ground=X_WC_ground, key_var_m2=var, key_sys_m=sys_m, correction=correction, emap=emap,
             costmap=costmap,
             version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
         )  # fmt: skip

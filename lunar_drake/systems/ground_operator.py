@@ -32,6 +32,7 @@ class GroundOperator(LeafSystem):
         input_ports:
         - telemetry
         - pose_correction
+        - pose_sigma
         - costmap
         output_ports:
         - commands
@@ -47,7 +48,8 @@ class GroundOperator(LeafSystem):
     ground's estimate of the rover's pose (x, y, z, roll, pitch, yaw; m, rad; site
     frame) from the newest telemetry carried forward to now. Optional inputs from the
     ground's perception (:class:`~lunar_drake.systems.ground_perception.
-    GroundPerception`): ``pose_correction`` (dx, dy, dyaw) applied to that estimate, and
+    GroundPerception`): ``pose_correction`` (dx, dy, dyaw) applied to that estimate,
+    ``pose_sigma`` (1,) its position sigma (m; goals are judged with it), and
     ``costmap`` ((version, Costmap)): plans are made on it and, when its version
     changes, the path being driven is checked against it (replanned if a new hazard
     blocks it). ``preview`` (abstract): (goto seq, (N, 4) array of t, x, y, z) the
@@ -83,6 +85,7 @@ class GroundOperator(LeafSystem):
         self._preview = preview
         self.telemetry_input = self.DeclareAbstractInputPort("telemetry", AbstractValue.Make(()))
         self.pose_correction_input = self.DeclareVectorInputPort("pose_correction", 3)
+        self.pose_sigma_input = self.DeclareVectorInputPort("pose_sigma", 1)
         self.costmap_input = self.DeclareAbstractInputPort("costmap", AbstractValue.Make((0, None)))
         # (OperatorState, index of the next scheduled action, Python requests)
         self._state = self.DeclareAbstractState(AbstractValue.Make((OperatorState(), 0, ())))
@@ -223,6 +226,8 @@ class GroundOperator(LeafSystem):
             start_pose=self._start,
             requests=(*due, *reqs),
             correction=self._correction(context),
+            sigma_m=(float(self.pose_sigma_input.Eval(context)[0])
+                     if self.pose_sigma_input.HasValue(context) else 0.0),  # fmt: skip
             map_version=int(version),
             blocked=blocked,
             preview=self._preview,

@@ -51,6 +51,7 @@ class GroundPerception(LeafSystem):
         - images
         output_ports:
         - pose_correction
+        - pose_sigma
         - costmap
 
     ``images`` is the image downlink's inbox (deliveries of
@@ -58,7 +59,9 @@ class GroundPerception(LeafSystem):
     frames delivered since the last tick go through
     :func:`~lunar_drake.perception.ground_pipeline.perception_step`. Outputs:
     ``pose_correction`` (3,) = (dx, dy, dyaw) (m, rad): the planar map from the
-    on-board estimate to the ground's (``p' = Rz(dyaw) p + d``); ``costmap`` (abstract):
+    on-board estimate to the ground's (``p' = Rz(dyaw) p + d``); ``pose_sigma`` (1,) the
+    ground's position sigma (m, per axis; :attr:`~lunar_drake.perception.
+    ground_pipeline.PerceptionState.sigma_m`); ``costmap`` (abstract):
     (version, :class:`~lunar_drake.autonomy.costmap.Costmap`), the a-priori costmap
     with the stereo hazards merged in, ``version`` counting the keyframes that added
     lethal cells. State (abstract): the PerceptionState.
@@ -84,6 +87,12 @@ class GroundPerception(LeafSystem):
             "pose_correction",
             BasicVector(3),
             lambda c, o: o.SetFromVector(planar_correction(self.perception_state(c).correction)),
+            prerequisites_of_calc={self.all_state_ticket()},
+        )
+        self.pose_sigma_output = self.DeclareVectorOutputPort(
+            "pose_sigma",
+            BasicVector(1),
+            lambda c, o: o.SetFromVector([self.perception_state(c).sigma_m]),
             prerequisites_of_calc={self.all_state_ticket()},
         )
         self.costmap_output = self.DeclareAbstractOutputPort(
