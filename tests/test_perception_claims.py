@@ -1,7 +1,7 @@
-"""Regression pins of the headline perception claims (docs/design.md, "Ground
-perception"), on small seeded cases of the vo-study (studies/vo_study.py: the mission's
-rover, full plant, flight software and link): after a 30 deg turn in place (the
-``small`` site, 640 x 480: the mission's cameras), visual odometry is nearer the true camera motion than the
+"""Regression pins of the headline perception claims (docs/design.md, "Ground perception"),
+on small seeded cases of the vo-study (studies/vo_study.py: the mission's rover, full
+plant, flight software and link): after a 30 deg turn in place (the ``small`` site, 640
+x 480: the mission's cameras), visual odometry is nearer the true camera motion than the
 fused odometry (wheels, IMU, star tracker); on a straight drive (the default site) VO
 ends under 1 % of the distance off; and a mission on the orbital map in which stereo
 finds a rock the orbital map cannot show and the plan goes round it, where the same

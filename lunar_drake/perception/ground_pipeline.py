@@ -398,7 +398,8 @@ def perception_step(
         )  # fmt: skip
         s = dc.replace(
             s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,
-            key_X_WC_ground=X_WC_ground, key_var_m2=var, key_sys_m=sys_m, correction=correction, emap=emap,
+            key_X_WC_ground=X_WC_ground, key_var_m2=var, key_sys_m=sys_m, correction=correction,
+            emap=emap,
             costmap=costmap,
             version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
         )  # fmt: skip

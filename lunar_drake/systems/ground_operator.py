@@ -199,6 +199,11 @@ class GroundOperator(LeafSystem):
             return (0.0, 0.0, 0.0)
         return tuple(self.pose_correction_input.Eval(context))
 
+    def _sigma(self, context) -> float:
+        if not self.pose_sigma_input.HasValue(context):
+            return 0.0
+        return float(self.pose_sigma_input.Eval(context)[0])
+
     def _update(self, context, state):
         now = context.get_time()
         st, k, reqs = context.get_abstract_state(self._state).get_value()
@@ -226,8 +231,7 @@ class GroundOperator(LeafSystem):
             start_pose=self._start,
             requests=(*due, *reqs),
             correction=self._correction(context),
-            sigma_m=(float(self.pose_sigma_input.Eval(context)[0])
-                     if self.pose_sigma_input.HasValue(context) else 0.0),  # fmt: skip
+            sigma_m=self._sigma(context),
             map_version=int(version),
             blocked=blocked,
             preview=self._preview,
