@@ -281,3 +281,14 @@ def test_unknown_limb_and_bad_inputs_are_refused():
         array_output(**kw, sun_direction_W=sun_north(1.0), sun_distance_km=-1.0)
     with pytest.raises(ConfigError, match=r"PanelMount\.n_B"):
         PanelMount(n_B=(0.0, 0.0, 0.0), p_BP=(0.0, 0.0, 0.0), area_m2=1.0)
+
+
+def test_panel_mount_agrees_with_the_rover_models_panel():
+    from lunar_drake.models.rover_description import husky_rp, krex2_rp
+
+    for d in (krex2_rp(), husky_rp()):
+        m = PanelMount.from_description(d)
+        assert np.allclose(m.n_B, d.solar_panel_normal_C(), atol=1e-12)
+        top = d.chassis_height_m / 2
+        assert m.p_BP[2] == pytest.approx(top + d.solar_panel_mount_height_m)
+        assert m.area_m2 == pytest.approx(d.solar_panel_width_m * d.solar_panel_height_m)

@@ -34,7 +34,7 @@ Model (:func:`array_output`)::
   model of the panel yet).
 
 Neglected, and said so: Earthshine (the full Earth lights the site with ~0.1 W/m^2 at most,
-below 1e-4 of the Sun), light scattered by the terrain onto the panel, shadows of the
+about 1e-4 of the Sun), light scattered by the terrain onto the panel, shadows of the
 rover's own mast on the panel, cell mismatch and wiring/MPPT losses beyond
 ``packing_factor``, dust.
 """
@@ -87,7 +87,7 @@ class SolarArrayConfig:
 
     For scale: NASA's VIPER quotes about 450 W peak from its three-sided array (as
     reported for the VIPER mission; not an input here). The defaults on the KRex2/RP
-    preset's 1.0 x 0.7 m panel give about 230 W at normal incidence.
+    preset's 1.0 x 0.7 m panel give about 227 W at normal incidence.
     """
 
     cell_efficiency: float = 0.28
