@@ -292,3 +292,24 @@ def test_panel_mount_agrees_with_the_rover_models_panel():
         top = d.chassis_height_m / 2
         assert m.p_BP[2] == pytest.approx(top + d.solar_panel_mount_height_m)
         assert m.area_m2 == pytest.approx(d.solar_panel_width_m * d.solar_panel_height_m)
+
+
+def test_without_terrain_a_level_plain_hides_a_sun_below_the_horizontal():
+    kw = dict(config=SolarArrayConfig(), mount=MOUNT, R_WB=np.eye(3), p_WB=P_WB)
+    assert array_output(**kw, sun_direction_W=sun_north(-1.0), sun_distance_km=AU).power_W == 0.0
+    half = array_output(**kw, sun_direction_W=sun_north(0.0), sun_distance_km=AU)
+    assert half.visible_fraction == pytest.approx(0.5, abs=1e-12)
+
+
+def test_power_config_loads_from_yaml():
+    from pydrake.common.yaml import yaml_load_typed
+
+    cfg = yaml_load_typed(
+        schema=PowerConfig,
+        data="array: {cell_efficiency: 0.3, limb: darkened}\nbattery: {capacity_Wh: 2000}\n"
+        "loads: {radio_W: 40}\n",
+    )
+    cfg.validate()
+    assert cfg.array.cell_efficiency == 0.3 and cfg.array.limb == "darkened"
+    assert cfg.battery.capacity_Wh == 2000.0 and cfg.loads.radio_W == 40.0
+    assert cfg.loads.avionics_W == LoadsConfig().avionics_W

@@ -254,7 +254,8 @@ def array_output(
         sun_direction_W: vector towards the Sun's centre in W (normalised here).
         sun_distance_km: site-Sun distance (km), > 0.
         heightfield: the site raster for the horizon from the panel's height (a
-            :class:`~lunar_drake.terrain.heightfield.Heightfield`); None: no terrain.
+            :class:`~lunar_drake.terrain.heightfield.Heightfield`); with neither it nor
+            ``horizon_mask`` nor ``horizon_elevation_rad``, a level plain (horizon 0).
         horizon_mask: terrain outside the raster (optional).
         horizon_elevation_rad: the horizon along the Sun's azimuth, given directly
             (instead of ``heightfield``/``horizon_mask``).
@@ -285,7 +286,7 @@ def array_output(
     elif horizon_mask is not None:
         h = math.radians(_mask_elevation_deg(horizon_mask, math.degrees(sun_az) % 360.0, p_WP))
     else:
-        h = -math.pi / 2.0
+        h = 0.0
     sun_radius = math.asin(SUN_RADIUS_KM / d_km)
     f = sun_disk_visible_fraction(
         sun_elevation_rad=sun_el, horizon_elevation_rad=h, sun_radius_rad=sun_radius,
