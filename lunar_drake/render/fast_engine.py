@@ -243,8 +243,10 @@ def _shade_terrain(
     lut, ldirs, lirr, sun_light, sphere, sun_out, other_out, cand_out,
     rad_out, depth_out, label_out, nwork,
 ):  # fmt: skip
-    """Per pixel: sun term (before the rover shadow), other lights, their sum, rover-shadow
-    cull, camera-z depth and label (1 terrain, 0 sky or ``skip``).
+    """Per pixel: the radiance (the sum of the lights), rover-shadow cull, camera-z depth
+    and label (1 terrain, 0 sky or ``skip``); at the cull's candidates only (``cand_out``
+    1; elsewhere they are left as they were), the sun term (before the rover shadow) and
+    the other lights' term, which the caller recombines with the rover shadow.
 
     Row by row in short passes over the row's terrain pixels (directions and positions,
     surface texture, normals, one pass per light, lightmap, cull): each pass is a
@@ -304,8 +306,6 @@ def _shade_terrain(
             n = 0
             for col in range(width):
                 i = base + col
-                sun_out[i] = 0.0
-                other_out[i] = 0.0
                 rad_out[i] = 0.0
                 cand_out[i] = 0
                 label_out[i] = 0
@@ -532,8 +532,6 @@ def _shade_terrain(
             if n > 0 and col_of[n - 1] - col_of[0] == n - 1:  # one run of columns: vector stores
                 b0 = base + col_of[0]
                 for j in range(n):
-                    sun_out[b0 + j] = SUN[j]
-                    other_out[b0 + j] = OTH[j]
                     rad_out[b0 + j] = SUN[j] + OTH[j]
                     label_out[b0 + j] = 1
                     depth_out[b0 + j] = TT[j]
@@ -541,12 +539,16 @@ def _shade_terrain(
             else:
                 for j in range(n):
                     i = base + col_of[j]
-                    sun_out[i] = SUN[j]
-                    other_out[i] = OTH[j]
                     rad_out[i] = SUN[j] + OTH[j]
                     label_out[i] = 1
                     depth_out[i] = TT[j]
                     cand_out[i] = CU[j]
+            if sphere[4] > 0.0:  # the caller reads sun and other at candidates only
+                for j in range(n):
+                    if CU[j]:
+                        i = base + col_of[j]
+                        sun_out[i] = SUN[j]
+                        other_out[i] = OTH[j]
 
 
 def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.0):
