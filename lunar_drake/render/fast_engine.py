@@ -60,6 +60,7 @@ from lunar_drake.render.regolith import (
     build_texture,
     inverse_footprint,
     load_i32,
+    load_pair_f32,
     octave_blend,
     octave_cell,
     octave_weight,
@@ -208,14 +209,11 @@ def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out,
     sg = np.int32(lut.shape[1]) * si
     for j in range(n):  # corners t[di][dj][dk] (i, e, g) at k + di si + dj + dk sg
         k = KI[j]
-        T8[0, j] = load_i32(lut, k)
-        T8[1, j] = load_i32(lut, k + sg)
-        T8[2, j] = load_i32(lut, k + 1)
-        T8[3, j] = load_i32(lut, k + 1 + sg)
-        T8[4, j] = load_i32(lut, k + si)
-        T8[5, j] = load_i32(lut, k + si + sg)
-        T8[6, j] = load_i32(lut, k + si + 1)
-        T8[7, j] = load_i32(lut, k + si + 1 + sg)
+        # e neighbours are adjacent (dj = 0, 1): one 64-bit load per pair
+        T8[0, j], T8[2, j] = load_pair_f32(lut, k)
+        T8[1, j], T8[3, j] = load_pair_f32(lut, k + sg)
+        T8[4, j], T8[6, j] = load_pair_f32(lut, k + si)
+        T8[5, j], T8[7, j] = load_pair_f32(lut, k + si + sg)
     for j in range(n):
         r = trilerp(
             T8[0, j], T8[1, j], T8[2, j], T8[3, j], T8[4, j], T8[5, j], T8[6, j], T8[7, j],
@@ -340,11 +338,15 @@ def _shade_terrain(
                 k = KI[j]
                 dc = K2[0, j]
                 dr = K2[1, j]
-                for c in range(3):
-                    T8[c, j] = load_i32(surf, k + c)
-                    T8[3 + c, j] = load_i32(surf, k + dc + c)
-                    T8[6 + c, j] = load_i32(surf, k + dr + c)
-                    T8[9 + c, j] = load_i32(surf, k + dr + dc + c)
+                # a corner's (nx, ny) pair in one 64-bit load, its albedo in another
+                T8[0, j], T8[1, j] = load_pair_f32(surf, k)
+                T8[2, j] = load_i32(surf, k + 2)
+                T8[3, j], T8[4, j] = load_pair_f32(surf, k + dc)
+                T8[5, j] = load_i32(surf, k + dc + 2)
+                T8[6, j], T8[7, j] = load_pair_f32(surf, k + dr)
+                T8[8, j] = load_i32(surf, k + dr + 2)
+                T8[9, j], T8[10, j] = load_pair_f32(surf, k + dr + dc)
+                T8[11, j] = load_i32(surf, k + dr + dc + 2)
             one = np.float32(1.0)
             for j in range(n):
                 fc = F3[0, j]
