@@ -297,6 +297,44 @@ def test_engines_agree_on_a_bumpy_site_with_a_rover_and_its_shadow():
     assert again.radiance.tobytes() == a.radiance.tobytes()
 
 
+def test_frames_are_bit_identical_whatever_the_thread_count():
+    # rows and profile groups go to the threads through a shared queue (row_queue): which
+    # thread renders a row must not change a byte, rover shadow candidates included
+    import numba
+
+    hf = _bumpy()
+    box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
+    z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
+    X_box = np.eye(4)
+    X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
+    X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    r = _renderers(hf, [box], w=160, h=120)["heightfield"]
+    lm = RasterSampler.on_heightfield(
+        np.linspace(0.6, 1.0, hf.shape[1], dtype=np.float32)[None, :].repeat(hf.shape[0], 0),
+        hf,
+        outside=1.0,
+    )
+    il, _ = r.illumination(
+        sun_dir_W=(-0.6, 0.75, 0.28), earth_dir_W=(0.2, -0.3, 0.93), earth_phase=0.6
+    )
+    threads = numba.get_num_threads()
+    out = []
+    try:
+        for n in sorted({1, threads}):
+            numba.set_num_threads(n)
+            sh = r.shade(X_WC=X, illumination=il, dynamic_poses=[X_box], lightmap=lm)
+            raw = r.expose(sh, exposure_s=r.model.exposure_s, gain=1.0, key=7, frame_index=3)
+            out.append((sh, raw))
+    finally:
+        numba.set_num_threads(threads)
+    (a, ra), (b, rb) = out[0], out[-1]
+    assert (a.label == 2).sum() > 200 and (a.label == 1).sum() > 5000
+    assert a.radiance.tobytes() == b.radiance.tobytes()
+    assert a.depth.tobytes() == b.depth.tobytes()
+    assert a.label.tobytes() == b.label.tobytes()
+    assert ra.tobytes() == rb.tobytes()
+
+
 def test_engines_agree_under_spotlights_and_wheel_tracks():
     from lunar_drake.render.shading import SpotLight
 

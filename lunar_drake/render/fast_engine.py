@@ -26,6 +26,7 @@ triangles; silhouettes are resolved per azimuth bin; the BRDF is tabulated.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -35,7 +36,6 @@ import numpy as np
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
     lut_axis_f32,
-    lut_cell_f32,
     trilerp,
 )
 from lunar_drake.render.heightfield_trace import DemPyramid, pixel_direction, trace_heightfield
@@ -60,11 +60,13 @@ from lunar_drake.render.regolith import (
     build_texture,
     inverse_footprint,
     load_i32,
+    load_pair_f32,
     octave_blend,
     octave_cell,
     octave_weight,
     wrap_coordinates,
 )
+from lunar_drake.render.row_queue import fetch_add, workers
 from lunar_drake.render.shading import (
     GBuffer,
     Illumination,
@@ -80,6 +82,7 @@ from lunar_drake.render.shading import (
 __all__ = ["FastTerrainEngine", "rover_pixel_mask"]
 
 _NO_TEX = np.zeros((2, 2), np.float32)
+_ROWS = 8  # rows a worker takes from the queue at a time (neighbours share DEM cells)
 _NO_PARAM = np.zeros(6, np.float64)
 
 
@@ -149,36 +152,68 @@ def _surface_cell(h, w, p, x, y):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
+def _lut_cell_gie(tab, x, y, cg):
+    """:func:`~lunar_drake.render.hapke_lut.lut_cell_f32` for the table stored phase
+    first, ``tab[g, i, e]`` (:func:`lut_phase_major`): the same fractions, the flat
+    int32 index of the (i0, j0, k0) corner in that layout."""
+    ng = tab.shape[0] - 1
+    ni = tab.shape[1] - 1
+    ne = tab.shape[2] - 1
+    one = np.float32(1.0)
+    h = np.float32(0.5) * (one - cg)
+    h = min(max(h, np.float32(0.0)), one)
+    z = np.float32(math.sqrt(np.float32(math.sqrt(h)))) * np.float32(ng)
+    # x, y, z >= 0: int32 truncation is int() (and vectorizes)
+    i0 = min(np.int32(x), np.int32(ni - 1))
+    j0 = min(np.int32(y), np.int32(ne - 1))
+    k0 = min(np.int32(z), np.int32(ng - 1))
+    fx = x - np.float32(i0)
+    fy = y - np.float32(j0)
+    fz = z - np.float32(k0)
+    k = (k0 * np.int32(ni + 1) + i0) * np.int32(ne + 1) + j0
+    return k, fx, fy, fz
+
+
+def lut_phase_major(table: np.ndarray) -> np.ndarray:
+    """The reflectance table ``table[i, e, g]`` stored as ``[g, i, e]`` (C order) for
+    the shading kernel: the same values, read with the same trilinear blend.
+
+    A frame's pixels read a light's table at nearly the same phase angle (it varies
+    smoothly over the image) but at scattered incidence and emission (bumped normals):
+    with the emission axis contiguous the cells a row reads share cache lines, where the
+    phase-contiguous layout spent a line on every (i, e) pair."""
+    return np.ascontiguousarray(np.transpose(table, (2, 0, 1)))
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
 def _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, irradiance, out, KI, F3, T8):
     """``out[j] = irradiance * r`` of the distant light toward (lx, ly, lz) for the
     row's pixels j < n, all float32, in three loops: table cells (vector code), the
     eight corner reads (a loop of loads only), the trilinear blend (vector code). The
     light is passed as scalars, not an array whose loads the stores could alias.
+    ``lut`` is the phase-major table (:func:`lut_phase_major`).
 
     Loads through computed indices keep a loop scalar where the compiler does not emit
     gathers (AMD Zen: no ``fast-gather``), so they get a loop of their own."""
-    m = np.float32(lut.shape[0] - 1)
+    m = np.float32(lut.shape[1] - 1)
     for j in range(n):
         ci = NX[j] * lx + NY[j] * ly + NZ[j] * lz
         cg = -(D0[j] * lx + D1[j] * ly + D2[j] * lz)
         # ci <= 0 reads the table's last i row, which is 0: no light, no branch
-        k, fx, fy, fz = lut_cell_f32(lut, lut_axis_f32(ci, m), YE[j], cg)
+        k, fx, fy, fz = _lut_cell_gie(lut, lut_axis_f32(ci, m), YE[j], cg)
         KI[j] = k
         F3[0, j] = fx
         F3[1, j] = fy
         F3[2, j] = fz
-    s1 = np.int32(lut.shape[2])
-    s0 = np.int32(lut.shape[1]) * s1
-    for j in range(n):
+    si = np.int32(lut.shape[2])
+    sg = np.int32(lut.shape[1]) * si
+    for j in range(n):  # corners t[di][dj][dk] (i, e, g) at k + di si + dj + dk sg
         k = KI[j]
-        T8[0, j] = load_i32(lut, k)
-        T8[1, j] = load_i32(lut, k + 1)
-        T8[2, j] = load_i32(lut, k + s1)
-        T8[3, j] = load_i32(lut, k + s1 + 1)
-        T8[4, j] = load_i32(lut, k + s0)
-        T8[5, j] = load_i32(lut, k + s0 + 1)
-        T8[6, j] = load_i32(lut, k + s0 + s1)
-        T8[7, j] = load_i32(lut, k + s0 + s1 + 1)
+        # e neighbours are adjacent (dj = 0, 1): one 64-bit load per pair
+        T8[0, j], T8[2, j] = load_pair_f32(lut, k)
+        T8[1, j], T8[3, j] = load_pair_f32(lut, k + sg)
+        T8[4, j], T8[6, j] = load_pair_f32(lut, k + si)
+        T8[5, j], T8[7, j] = load_pair_f32(lut, k + si + sg)
     for j in range(n):
         r = trilerp(
             T8[0, j], T8[1, j], T8[2, j], T8[3, j], T8[4, j], T8[5, j], T8[6, j], T8[7, j],
@@ -204,10 +239,12 @@ def _shade_terrain(
     lma, lpar, use_lm, gxa, gya, gpar, use_bump,
     ttop, tbot, tpar, tperiod, tfade, use_tex, pix_ang, soft_lm,
     lut, ldirs, lirr, sun_light, sphere, sun_out, other_out, cand_out,
-    rad_out, depth_out, label_out,
+    rad_out, depth_out, label_out, nwork,
 ):  # fmt: skip
-    """Per pixel: sun term (before the rover shadow), other lights, their sum, rover-shadow
-    cull, camera-z depth and label (1 terrain, 0 sky or ``skip``).
+    """Per pixel: the radiance (the sum of the lights), rover-shadow cull, camera-z depth
+    and label (1 terrain, 0 sky or ``skip``); at the cull's candidates only (``cand_out``
+    1; elsewhere they are left as they were), the sun term (before the rover shadow) and
+    the other lights' term, which the caller recombines with the rover shadow.
 
     Row by row in short passes over the row's terrain pixels (directions and positions,
     surface texture, normals, one pass per light, lightmap, cull): each pass is a
@@ -216,13 +253,14 @@ def _shade_terrain(
     into an index pass (vector code), a loop of loads only and a blend pass (vector
     code): without gathers a loop that loads through computed indices stays scalar."""
     nl = ldirs.shape[0]
-    m_e = lut.shape[1] - 1
+    m_e = lut.shape[2] - 1  # the phase-major table: [g, i, e]
     n_oct = tpar.shape[0]
     tsize = np.float32(math.sqrt(ttop.size))
     tinv = np.float32(1.0) / tsize
     sh = surf.shape[0]
     sw = surf.shape[1]
-    for row in numba.prange(height):
+    counter = np.zeros(1, np.int64)  # the next row to render (row_queue)
+    for _w in numba.prange(nwork):
         col_of = np.empty(width, np.int64)
         CF = np.empty(width)
         D0 = np.empty(width, np.float32)
@@ -253,248 +291,266 @@ def _shade_terrain(
         P2 = np.empty((2, width), np.int32)
         LO = np.empty(width, np.uint8)
         CU = np.zeros(width, np.uint8)
-        base = row * width
-        n = 0
-        for col in range(width):
-            i = base + col
-            sun_out[i] = 0.0
-            other_out[i] = 0.0
-            rad_out[i] = 0.0
-            cand_out[i] = 0
-            label_out[i] = 0
-            depth_out[i] = np.inf
-            if t[i] < np.inf and skip[i] == 0:
-                col_of[n] = col
-                CF[n] = col
-                TT[n] = t[i]
-                n += 1
-        for j in range(n):  # directions and hit points
-            d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, CF[j])
-            ti = TT[j]
-            D0[j] = d0
-            D1[j] = d1
-            D2[j] = d2
-            X[j] = cam[0] + ti * d0
-            Y[j] = cam[1] + ti * d1
-            Z[j] = cam[2] + ti * d2
-        # normal map and albedo: cells, the twelve reads, the bilinear blend
-        for j in range(n):
-            k, dc, dr, fc, fr = _surface_cell(sh, sw, spar, X[j], Y[j])
-            KI[j] = k
-            K2[0, j] = dc
-            K2[1, j] = dr
-            F3[0, j] = fc
-            F3[1, j] = fr
-        for j in range(n):
-            k = KI[j]
-            dc = K2[0, j]
-            dr = K2[1, j]
-            for c in range(3):
-                T8[c, j] = load_i32(surf, k + c)
-                T8[3 + c, j] = load_i32(surf, k + dc + c)
-                T8[6 + c, j] = load_i32(surf, k + dr + c)
-                T8[9 + c, j] = load_i32(surf, k + dr + dc + c)
-        one = np.float32(1.0)
-        for j in range(n):
-            fc = F3[0, j]
-            fr = F3[1, j]
-            w00 = (one - fr) * (one - fc)
-            w01 = (one - fr) * fc
-            w10 = fr * (one - fc)
-            w11 = fr * fc
-            NX[j] = w00 * T8[0, j] + w01 * T8[3, j] + w10 * T8[6, j] + w11 * T8[9, j]
-            NY[j] = w00 * T8[1, j] + w01 * T8[4, j] + w10 * T8[7, j] + w11 * T8[10, j]
-            alb = w00 * T8[2, j] + w01 * T8[5, j] + w10 * T8[8, j] + w11 * T8[11, j]
-            AF[j] = alb * np.float32(afac_scale)
-        if use_bump:
+        row = -1
+        end = 0
+        while True:
+            row += 1
+            if row >= end:  # the next _ROWS rows from the queue
+                row = fetch_add(counter, _ROWS)
+                end = min(row + _ROWS, height)
+            if row >= height:
+                break
+            base = row * width
+            n = 0
+            for col in range(width):
+                i = base + col
+                rad_out[i] = 0.0
+                cand_out[i] = 0
+                label_out[i] = 0
+                depth_out[i] = np.inf
+                if t[i] < np.inf and skip[i] == 0:
+                    col_of[n] = col
+                    CF[n] = col
+                    TT[n] = t[i]
+                    n += 1
+            for j in range(n):  # the worker's buffers hold the last row's values
+                SUN[j] = 0.0
+                OTH[j] = 0.0
+                CU[j] = 0
+            for j in range(n):  # directions and hit points
+                d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, CF[j])
+                ti = TT[j]
+                D0[j] = d0
+                D1[j] = d1
+                D2[j] = d2
+                X[j] = cam[0] + ti * d0
+                Y[j] = cam[1] + ti * d1
+                Z[j] = cam[2] + ti * d2
+            # normal map and albedo: cells, the twelve reads, the bilinear blend
             for j in range(n):
-                nx = NX[j]
-                ny = NY[j]
-                nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
-                if nz > 1e-3:
-                    bx = nx / nz + _tex(gxa, gpar, X[j], Y[j])
-                    by = ny / nz + _tex(gya, gpar, X[j], Y[j])
-                    inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
+                k, dc, dr, fc, fr = _surface_cell(sh, sw, spar, X[j], Y[j])
+                KI[j] = k
+                K2[0, j] = dc
+                K2[1, j] = dr
+                F3[0, j] = fc
+                F3[1, j] = fr
+            for j in range(n):
+                k = KI[j]
+                dc = K2[0, j]
+                dr = K2[1, j]
+                # a corner's (nx, ny) pair in one 64-bit load, its albedo in another
+                T8[0, j], T8[1, j] = load_pair_f32(surf, k)
+                T8[2, j] = load_i32(surf, k + 2)
+                T8[3, j], T8[4, j] = load_pair_f32(surf, k + dc)
+                T8[5, j] = load_i32(surf, k + dc + 2)
+                T8[6, j], T8[7, j] = load_pair_f32(surf, k + dr)
+                T8[8, j] = load_i32(surf, k + dr + 2)
+                T8[9, j], T8[10, j] = load_pair_f32(surf, k + dr + dc)
+                T8[11, j] = load_i32(surf, k + dr + dc + 2)
+            one = np.float32(1.0)
+            for j in range(n):
+                fc = F3[0, j]
+                fr = F3[1, j]
+                w00 = (one - fr) * (one - fc)
+                w01 = (one - fr) * fc
+                w10 = fr * (one - fc)
+                w11 = fr * fc
+                NX[j] = w00 * T8[0, j] + w01 * T8[3, j] + w10 * T8[6, j] + w11 * T8[9, j]
+                NY[j] = w00 * T8[1, j] + w01 * T8[4, j] + w10 * T8[7, j] + w11 * T8[10, j]
+                alb = w00 * T8[2, j] + w01 * T8[5, j] + w10 * T8[8, j] + w11 * T8[11, j]
+                AF[j] = alb * np.float32(afac_scale)
+            if use_bump:
+                for j in range(n):
+                    nx = NX[j]
+                    ny = NY[j]
+                    nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
+                    if nz > 1e-3:
+                        bx = nx / nz + _tex(gxa, gpar, X[j], Y[j])
+                        by = ny / nz + _tex(gya, gpar, X[j], Y[j])
+                        inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
+                        NX[j] = bx * inv
+                        NY[j] = by * inv
+            if use_tex and n > 0:  # sub-cell regolith texture (render/regolith.py)
+                for j in range(n):  # 1 / footprint = sqrt(cos_e) / (distance x pixel angle)
+                    nx = NX[j]
+                    ny = NY[j]
+                    nz2 = min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)
+                    nz = np.float32(math.sqrt(nz2))
+                    ce = max(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(0.05))
+                    FT[j] = np.float32(math.sqrt(ce)) / (TT[j] * np.float32(pix_ang))
+                    NZ[j] = nz
+                    TA[j] = 0.0
+                    TX[j] = 0.0
+                    TY[j] = 0.0
+                for j in range(n):  # site coordinates wrapped to the texture's period
+                    XW[j] = wrap_coordinates(X[j], tperiod)
+                    YW[j] = wrap_coordinates(Y[j], tperiod)
+                imax = _row_max(FT, n)
+                for k in range(n_oct):
+                    lamf = np.float32(tpar[k, P_LAMBDA] / tfade)
+                    if lamf * imax <= one:  # this octave is off in the whole row
+                        continue
+                    cs = np.float32(tpar[k, P_CS])
+                    ss = np.float32(tpar[k, P_SS])
+                    ou = np.float32(tpar[k, P_OU])
+                    ov = np.float32(tpar[k, P_OV])
+                    c = np.float32(tpar[k, P_COS])
+                    sn = np.float32(tpar[k, P_SIN])
+                    wa = np.float32(tpar[k, P_ALB])
+                    ws = np.float32(tpar[k, P_SLOPE])
+                    for j in range(n):
+                        kk, du, dv = octave_cell(tsize, tinv, cs, ss, ou, ov, XW[j], YW[j])
+                        KI[j] = kk
+                        F3[0, j] = du
+                        F3[1, j] = dv
+                    for j in range(n):
+                        kk = KI[j]
+                        P2[0, j] = load_i32(ttop, kk)
+                        P2[1, j] = load_i32(tbot, kk)
+                    for j in range(n):
+                        w = octave_weight(lamf, FT[j])
+                        a, gu, gv = octave_blend(P2[0, j], P2[1, j], F3[0, j], F3[1, j])
+                        wsj = w * ws
+                        TA[j] += (w * wa) * a
+                        TX[j] += wsj * (c * gu + sn * gv)
+                        TY[j] += wsj * (c * gv - sn * gu)
+                for j in range(n):  # bump the normal, scale the albedo
+                    rz = one / max(NZ[j], np.float32(1e-3))
+                    bx = NX[j] * rz - TX[j]
+                    by = NY[j] * rz - TY[j]
+                    inv = one / np.float32(math.sqrt(bx * bx + by * by + one))
                     NX[j] = bx * inv
                     NY[j] = by * inv
-        if use_tex and n > 0:  # sub-cell regolith texture (render/regolith.py)
-            for j in range(n):  # 1 / footprint = sqrt(cos_e) / (distance x pixel angle)
+                    AF[j] *= max(one + TA[j], np.float32(0.05))
+            for j in range(n):  # nz and the emission axis of the table
                 nx = NX[j]
                 ny = NY[j]
                 nz = np.float32(math.sqrt(min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)))
-                ce = max(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(0.05))
-                FT[j] = np.float32(math.sqrt(ce)) / (TT[j] * np.float32(pix_ang))
                 NZ[j] = nz
-                TA[j] = 0.0
-                TX[j] = 0.0
-                TY[j] = 0.0
-            for j in range(n):  # site coordinates wrapped to the texture's period
-                XW[j] = wrap_coordinates(X[j], tperiod)
-                YW[j] = wrap_coordinates(Y[j], tperiod)
-            imax = _row_max(FT, n)
-            for k in range(n_oct):
-                lamf = np.float32(tpar[k, P_LAMBDA] / tfade)
-                if lamf * imax <= one:  # this octave is off in the whole row
-                    continue
-                cs = np.float32(tpar[k, P_CS])
-                ss = np.float32(tpar[k, P_SS])
-                ou = np.float32(tpar[k, P_OU])
-                ov = np.float32(tpar[k, P_OV])
-                c = np.float32(tpar[k, P_COS])
-                sn = np.float32(tpar[k, P_SIN])
-                wa = np.float32(tpar[k, P_ALB])
-                ws = np.float32(tpar[k, P_SLOPE])
+                YE[j] = lut_axis_f32(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(m_e))
+            for k in range(nl):
+                lx = np.float32(ldirs[k, 0])
+                ly = np.float32(ldirs[k, 1])
+                lz = np.float32(ldirs[k, 2])
+                e = np.float32(lirr[k])
+                # one call site for all lights: LLVM vectorized only one of two inlined
+                # copies, and the other ran scalar (3.5x slower per light, measured)
+                _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, TMP, KI, F3, T8)
+                if k == sun_light:
+                    for j in range(n):
+                        SUN[j] = TMP[j]
+                else:
+                    for j in range(n):
+                        OTH[j] += TMP[j]
+            if sun_light >= 0 and use_lm and soft_lm:
+                # quadratic B-spline of the lightmap (render/soft_shadow.py): cells and
+                # weights, the nine reads, the taps
+                lh = lma.shape[0]
+                lw = lma.shape[1]
+                half = np.float32(0.5)
                 for j in range(n):
-                    kk, du, dv = octave_cell(tsize, tinv, cs, ss, ou, ov, XW[j], YW[j])
-                    KI[j] = kk
-                    F3[0, j] = du
-                    F3[1, j] = dv
+                    col = (X[j] - lpar[2]) * lpar[0] - 0.5
+                    row_ = (lpar[3] - Y[j]) * lpar[1] - 0.5
+                    out_ = (lpar[4] != 0.0) & (
+                        (row_ < -0.5) | (row_ > lh - 0.5) | (col < -0.5) | (col > lw - 0.5)
+                    )
+                    LO[j] = np.uint8(out_)
+                    col = min(max(col, -0.5), lw - 0.5)
+                    row_ = min(max(row_, -0.5), lh - 0.5)
+                    fc = np.floor(col + 0.5)
+                    fr = np.floor(row_ + 0.5)
+                    tc = np.float32(col - fc)
+                    tr = np.float32(row_ - fr)
+                    # fc, fr >= 0 (col, row >= -0.5): int32 truncation is int()
+                    ic = min(np.int32(fc), np.int32(lw - 1))
+                    ir = min(np.int32(fr), np.int32(lh - 1))
+                    lw32 = np.int32(lw)
+                    k = ir * lw32 + ic
+                    KI[j] = k
+                    K2[0, j] = ic - max(ic - np.int32(1), np.int32(0))  # to the left column
+                    K2[1, j] = min(ic + np.int32(1), np.int32(lw - 1)) - ic  # to the right
+                    P2[0, j] = (ir - max(ir - np.int32(1), np.int32(0))) * lw32  # up a row
+                    P2[1, j] = (min(ir + np.int32(1), np.int32(lh - 1)) - ir) * lw32  # down
+                    TA[j] = half * (half - tc) * (half - tc)
+                    TX[j] = np.float32(0.75) - tc * tc
+                    TY[j] = half * (half + tc) * (half + tc)
+                    FT[j] = half * (half - tr) * (half - tr)
+                    XW[j] = np.float32(0.75) - tr * tr
+                    YW[j] = half * (half + tr) * (half + tr)
                 for j in range(n):
-                    kk = KI[j]
-                    P2[0, j] = load_i32(ttop, kk)
-                    P2[1, j] = load_i32(tbot, kk)
+                    k = KI[j]
+                    cl = K2[0, j]
+                    cr = K2[1, j]
+                    r0 = k - P2[0, j]
+                    r2 = k + P2[1, j]
+                    T8[0, j] = load_i32(lma, r0 - cl)
+                    T8[1, j] = load_i32(lma, r0)
+                    T8[2, j] = load_i32(lma, r0 + cr)
+                    T8[3, j] = load_i32(lma, k - cl)
+                    T8[4, j] = load_i32(lma, k)
+                    T8[5, j] = load_i32(lma, k + cr)
+                    T8[6, j] = load_i32(lma, r2 - cl)
+                    T8[7, j] = load_i32(lma, r2)
+                    T8[8, j] = load_i32(lma, r2 + cr)
+                lout = np.float32(lpar[5])
                 for j in range(n):
-                    w = octave_weight(lamf, FT[j])
-                    a, gu, gv = octave_blend(P2[0, j], P2[1, j], F3[0, j], F3[1, j])
-                    wsj = w * ws
-                    TA[j] += (w * wa) * a
-                    TX[j] += wsj * (c * gu + sn * gv)
-                    TY[j] += wsj * (c * gv - sn * gu)
-            for j in range(n):  # bump the normal, scale the albedo
-                rz = one / max(NZ[j], np.float32(1e-3))
-                bx = NX[j] * rz - TX[j]
-                by = NY[j] * rz - TY[j]
-                inv = one / np.float32(math.sqrt(bx * bx + by * by + one))
-                NX[j] = bx * inv
-                NY[j] = by * inv
-                AF[j] *= max(one + TA[j], np.float32(0.05))
-        for j in range(n):  # nz and the emission axis of the table
-            nx = NX[j]
-            ny = NY[j]
-            nz = np.float32(math.sqrt(min(max(one - nx * nx - ny * ny, np.float32(1e-6)), one)))
-            NZ[j] = nz
-            YE[j] = lut_axis_f32(-(nx * D0[j] + ny * D1[j] + nz * D2[j]), np.float32(m_e))
-        for k in range(nl):
-            lx = np.float32(ldirs[k, 0])
-            ly = np.float32(ldirs[k, 1])
-            lz = np.float32(ldirs[k, 2])
-            e = np.float32(lirr[k])
-            # one call site for all lights: LLVM vectorized only one of two inlined
-            # copies, and the other ran scalar (3.5x slower per light, measured)
-            _light_term(lut, n, NX, NY, NZ, D0, D1, D2, YE, lx, ly, lz, e, TMP, KI, F3, T8)
-            if k == sun_light:
+                    f = (
+                        FT[j] * (TA[j] * T8[0, j] + TX[j] * T8[1, j] + TY[j] * T8[2, j])
+                        + XW[j] * (TA[j] * T8[3, j] + TX[j] * T8[4, j] + TY[j] * T8[5, j])
+                        + YW[j] * (TA[j] * T8[6, j] + TX[j] * T8[7, j] + TY[j] * T8[8, j])
+                    )
+                    f = min(max(f, np.float32(0.0)), np.float32(1.0))
+                    SUN[j] *= f + np.float32(LO[j]) * (lout - f)
+            elif sun_light >= 0 and use_lm:
                 for j in range(n):
-                    SUN[j] = TMP[j]
+                    SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
+            if sun_light >= 0 and sphere[4] > 0.0:
+                # rover-shadow candidates: the Sun ray from p (offset along the geometric
+                # normal) passes the rover's sphere within the disk
+                lx = ldirs[sun_light, 0]
+                ly = ldirs[sun_light, 1]
+                lz = ldirs[sun_light, 2]
+                rad = sphere[3]
+                for j in range(n):
+                    qx = X[j] - sphere[0]
+                    qy = Y[j] - sphere[1]
+                    qz = Z[j] - sphere[2]
+                    tp = -(qx * lx + qy * ly + qz * lz)
+                    qq = qx * qx + qy * qy + qz * qz
+                    reach = (max(tp, 0.0) + rad) * sphere[5] + rad + sphere[6]
+                    CU[j] = np.uint8(
+                        (SUN[j] > 0.0)
+                        & (tp > -rad - sphere[6])
+                        & (qq - tp * tp <= reach * reach + 1e-5 * qq + 1e-6)
+                    )
+            for j in range(n):  # outputs (vector code), then stored at their columns
+                sun_i = np.float32(SUN[j] * AF[j] * math.pi)
+                other_i = np.float32(OTH[j] * AF[j] * math.pi)
+                SUN[j] = sun_i
+                OTH[j] = other_i
+                xc = (CF[j] - cx) / fx
+                yc = (row - cy) / fy
+                TT[j] = TT[j] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
+            if n > 0 and col_of[n - 1] - col_of[0] == n - 1:  # one run of columns: vector stores
+                b0 = base + col_of[0]
+                for j in range(n):
+                    rad_out[b0 + j] = SUN[j] + OTH[j]
+                    label_out[b0 + j] = 1
+                    depth_out[b0 + j] = TT[j]
+                    cand_out[b0 + j] = CU[j]
             else:
                 for j in range(n):
-                    OTH[j] += TMP[j]
-        if sun_light >= 0 and use_lm and soft_lm:
-            # quadratic B-spline of the lightmap (render/soft_shadow.py): cells and
-            # weights, the nine reads, the taps
-            lh = lma.shape[0]
-            lw = lma.shape[1]
-            half = np.float32(0.5)
-            for j in range(n):
-                col = (X[j] - lpar[2]) * lpar[0] - 0.5
-                row_ = (lpar[3] - Y[j]) * lpar[1] - 0.5
-                out_ = (lpar[4] != 0.0) & (
-                    (row_ < -0.5) | (row_ > lh - 0.5) | (col < -0.5) | (col > lw - 0.5)
-                )
-                LO[j] = np.uint8(out_)
-                col = min(max(col, -0.5), lw - 0.5)
-                row_ = min(max(row_, -0.5), lh - 0.5)
-                fc = np.floor(col + 0.5)
-                fr = np.floor(row_ + 0.5)
-                tc = np.float32(col - fc)
-                tr = np.float32(row_ - fr)
-                # fc, fr >= 0 (col, row >= -0.5): int32 truncation is int()
-                ic = min(np.int32(fc), np.int32(lw - 1))
-                ir = min(np.int32(fr), np.int32(lh - 1))
-                lw32 = np.int32(lw)
-                k = ir * lw32 + ic
-                KI[j] = k
-                K2[0, j] = ic - max(ic - np.int32(1), np.int32(0))  # to the left column
-                K2[1, j] = min(ic + np.int32(1), np.int32(lw - 1)) - ic  # to the right
-                P2[0, j] = (ir - max(ir - np.int32(1), np.int32(0))) * lw32  # up a row
-                P2[1, j] = (min(ir + np.int32(1), np.int32(lh - 1)) - ir) * lw32  # down
-                TA[j] = half * (half - tc) * (half - tc)
-                TX[j] = np.float32(0.75) - tc * tc
-                TY[j] = half * (half + tc) * (half + tc)
-                FT[j] = half * (half - tr) * (half - tr)
-                XW[j] = np.float32(0.75) - tr * tr
-                YW[j] = half * (half + tr) * (half + tr)
-            for j in range(n):
-                k = KI[j]
-                cl = K2[0, j]
-                cr = K2[1, j]
-                r0 = k - P2[0, j]
-                r2 = k + P2[1, j]
-                T8[0, j] = load_i32(lma, r0 - cl)
-                T8[1, j] = load_i32(lma, r0)
-                T8[2, j] = load_i32(lma, r0 + cr)
-                T8[3, j] = load_i32(lma, k - cl)
-                T8[4, j] = load_i32(lma, k)
-                T8[5, j] = load_i32(lma, k + cr)
-                T8[6, j] = load_i32(lma, r2 - cl)
-                T8[7, j] = load_i32(lma, r2)
-                T8[8, j] = load_i32(lma, r2 + cr)
-            lout = np.float32(lpar[5])
-            for j in range(n):
-                f = (
-                    FT[j] * (TA[j] * T8[0, j] + TX[j] * T8[1, j] + TY[j] * T8[2, j])
-                    + XW[j] * (TA[j] * T8[3, j] + TX[j] * T8[4, j] + TY[j] * T8[5, j])
-                    + YW[j] * (TA[j] * T8[6, j] + TX[j] * T8[7, j] + TY[j] * T8[8, j])
-                )
-                f = min(max(f, np.float32(0.0)), np.float32(1.0))
-                SUN[j] *= f + np.float32(LO[j]) * (lout - f)
-        elif sun_light >= 0 and use_lm:
-            for j in range(n):
-                SUN[j] *= np.float32(min(max(_tex(lma, lpar, X[j], Y[j]), 0.0), 1.0))
-        if sun_light >= 0 and sphere[4] > 0.0:
-            # rover-shadow candidates: the Sun ray from p (offset along the geometric
-            # normal) passes the rover's sphere within the disk
-            lx = ldirs[sun_light, 0]
-            ly = ldirs[sun_light, 1]
-            lz = ldirs[sun_light, 2]
-            rad = sphere[3]
-            for j in range(n):
-                qx = X[j] - sphere[0]
-                qy = Y[j] - sphere[1]
-                qz = Z[j] - sphere[2]
-                tp = -(qx * lx + qy * ly + qz * lz)
-                qq = qx * qx + qy * qy + qz * qz
-                reach = (max(tp, 0.0) + rad) * sphere[5] + rad + sphere[6]
-                CU[j] = np.uint8(
-                    (SUN[j] > 0.0)
-                    & (tp > -rad - sphere[6])
-                    & (qq - tp * tp <= reach * reach + 1e-5 * qq + 1e-6)
-                )
-        for j in range(n):  # outputs (vector code), then stored at their columns
-            sun_i = np.float32(SUN[j] * AF[j] * math.pi)
-            other_i = np.float32(OTH[j] * AF[j] * math.pi)
-            SUN[j] = sun_i
-            OTH[j] = other_i
-            xc = (CF[j] - cx) / fx
-            yc = (row - cy) / fy
-            TT[j] = TT[j] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
-        if n > 0 and col_of[n - 1] - col_of[0] == n - 1:  # one run of columns: vector stores
-            b0 = base + col_of[0]
-            for j in range(n):
-                sun_out[b0 + j] = SUN[j]
-                other_out[b0 + j] = OTH[j]
-                rad_out[b0 + j] = SUN[j] + OTH[j]
-                label_out[b0 + j] = 1
-                depth_out[b0 + j] = TT[j]
-                cand_out[b0 + j] = CU[j]
-        else:
-            for j in range(n):
-                i = base + col_of[j]
-                sun_out[i] = SUN[j]
-                other_out[i] = OTH[j]
-                rad_out[i] = SUN[j] + OTH[j]
-                label_out[i] = 1
-                depth_out[i] = TT[j]
-                cand_out[i] = CU[j]
+                    i = base + col_of[j]
+                    rad_out[i] = SUN[j] + OTH[j]
+                    label_out[i] = 1
+                    depth_out[i] = TT[j]
+                    cand_out[i] = CU[j]
+            if sphere[4] > 0.0:  # the caller reads sun and other at candidates only
+                for j in range(n):
+                    if CU[j]:
+                        i = base + col_of[j]
+                        sun_out[i] = SUN[j]
+                        other_out[i] = OTH[j]
 
 
 def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.0):
@@ -733,8 +789,8 @@ class FastTerrainEngine:
             lma, lpar, lightmap is not None, gxa, gya, gpar, track_depth is not None,
             tex.top, tex.bottom, tex.params, tex.period, tex.fade, tex.enabled, pix_ang,
             self.config.soft_shadows,
-            self.lut.table, ldirs_a, lirr_a, sun_light, sphere, sun_t, other_t, cand,
-            rad, depth, label,
+            self._lut_gie, ldirs_a, lirr_a, sun_light, sphere, sun_t, other_t, cand,
+            rad, depth, label, workers(),
         )  # fmt: skip
 
         # soft rover shadow on the candidate terrain pixels
@@ -876,6 +932,11 @@ class FastTerrainEngine:
             surface=surf,
             surface_params=spar,
         )
+
+    @functools.cached_property
+    def _lut_gie(self) -> np.ndarray:
+        """The shading kernel's copy of the reflectance table (:func:`lut_phase_major`)."""
+        return lut_phase_major(self.lut.table)
 
     def with_options(self, **kw) -> FastTerrainEngine:
         return replace(self, **kw)

@@ -40,6 +40,8 @@ import numba
 import numpy as np
 
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.render.regolith import load_i32
+from lunar_drake.render.row_queue import fetch_add, workers
 
 __all__ = ["DemPyramid", "TraceResult", "trace_heightfield"]
 
@@ -197,25 +199,37 @@ def _bilinear(data, off, h, w, icx, icy, left, top, x, y):
     return top_ + fr * (bot - top_)
 
 
+@numba.njit(cache=True, inline="always")
+def _bilinear_cell(off, h, w, icx, icy, left, top, x, y):
+    """:func:`_bilinear` without the reads: ``(i, fc, fr)``, the int32 flat index of the
+    cell's (r0, c0) corner in the packed data (< 2**31 values) and the float64
+    fractions, the same arithmetic."""
+    col = (x - left) * icx - 0.5
+    row = (top - y) * icy - 0.5
+    col = min(max(col, 0.0), w - 1.0)
+    row = min(max(row, 0.0), h - 1.0)
+    # col, row >= 0: int32 truncation is int() (and vectorizes)
+    c0 = min(np.int32(col), np.int32(w - 2))
+    r0 = min(np.int32(row), np.int32(h - 2))
+    fc = col - c0
+    fr = row - r0
+    return np.int32(off) + r0 * np.int32(w) + c0, fc, fr
+
+
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _atan2(y, x):
     """atan2 to ~1e-5 rad (a minimax polynomial on [0, 1]; bins only need ~1e-4)."""
     ax = abs(x)
     ay = abs(y)
     mx = max(ax, ay)
-    if mx == 0.0:
-        return 0.0
-    a = min(ax, ay) / mx
+    a = min(ax, ay) / (mx if mx > 0.0 else 1.0)  # (0, 0): 0
     q = a * a
     r = (((-0.0117212 * q + 0.05265332) * q - 0.11643287) * q + 0.19354346) * q - 0.33262347
     r = (r * q + 0.99997726) * a
-    if ay > ax:
-        r = 0.5 * math.pi - r
-    if x < 0.0:
-        r = math.pi - r
-    if y < 0.0:
-        r = -r
-    return r
+    # selects, not branches: the caller's loop stays vector code
+    r = 0.5 * math.pi - r if ay > ax else r
+    r = math.pi - r if x < 0.0 else r
+    return -r if y < 0.0 else r
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -282,6 +296,7 @@ def _distance_steps(d_max, base_step, res0, pix, nlev):
     return ds, lv
 
 
+_ROWS = 8  # image rows a worker takes from the queue at a time (render/row_queue.py)
 _GROUP = 32  # profile bins marched side by side (16: 10-15 % slower on AMD Zen 3)
 
 
@@ -292,7 +307,7 @@ def _level(offs, hs, ws, cxs, cys, lev):
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend):
+def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, nwork):
     """AZ[k, b] = (running max of the elevation slope, terrain height) along bin b.
 
     Bins go in groups of ``_GROUP`` side by side (neighbouring DEM cells, a few cache
@@ -301,86 +316,115 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
     K = ds.size
     G = _GROUP
     ngroups = (nb + G - 1) // G
-    for g in numba.prange(ngroups):
-        b0 = g * G
-        nbg = min(G, nb - b0)
-        ux = np.empty(G)
-        uy = np.empty(G)
-        amax = np.full(G, -np.inf)
-        state = np.zeros(G, np.int8)  # 0 not entered, 1 inside, 2 left the DEM
-        for j in range(nbg):
-            th = th_lo + (b0 + j + 0.5) * dth
-            ux[j] = math.cos(th)
-            uy[j] = math.sin(th)
-            kend[b0 + j] = K
-        # steps that every bin of the group takes well inside the DEM (camera inside):
-        # no bounds or state tests there, and results go to row buffers first (stores
-        # to AZ, which the compiler cannot prove apart from the DEM, kept the loop
-        # scalar); this loop compiles to vector code (gathers), 13 -> 7 ms measured
-        k0 = 0
-        A0 = np.empty(G, np.float32)
-        A1 = np.empty(G, np.float32)
-        if bx0 < px < bx1 and by0 < py < by1:
-            dexit = np.inf
+    counter = np.zeros(1, np.int64)  # the next group to march (render/row_queue.py)
+    for _w in numba.prange(nwork):
+        while True:
+            g = fetch_add(counter, 1)
+            if g >= ngroups:
+                break
+            b0 = g * G
+            nbg = min(G, nb - b0)
+            ux = np.empty(G)
+            uy = np.empty(G)
+            amax = np.full(G, -np.inf)
+            state = np.zeros(G, np.int8)  # 0 not entered, 1 inside, 2 left the DEM
             for j in range(nbg):
-                if ux[j] > 0.0:
-                    dexit = min(dexit, (bx1 - px) / ux[j])
-                elif ux[j] < 0.0:
-                    dexit = min(dexit, (bx0 - px) / ux[j])
-                if uy[j] > 0.0:
-                    dexit = min(dexit, (by1 - py) / uy[j])
-                elif uy[j] < 0.0:
-                    dexit = min(dexit, (by0 - py) / uy[j])
-            dsafe = 0.999 * dexit - 1e-6 * (abs(px) + abs(py) + 1.0)
-            while k0 < K and ds[k0] < dsafe:
-                k0 += 1
-            for k in range(k0):
+                th = th_lo + (b0 + j + 0.5) * dth
+                ux[j] = math.cos(th)
+                uy[j] = math.sin(th)
+                kend[b0 + j] = K
+            # steps that every bin of the group takes well inside the DEM (camera inside):
+            # no bounds or state tests there, and results go to row buffers first (stores
+            # to AZ, which the compiler cannot prove apart from the DEM, kept the loop
+            # scalar); this loop compiles to vector code (gathers), 13 -> 7 ms measured
+            k0 = 0
+            A0 = np.empty(G, np.float32)
+            A1 = np.empty(G, np.float32)
+            IX = np.empty(G, np.int32)
+            FC = np.empty(G)
+            FR = np.empty(G)
+            Z4 = np.empty((4, G), np.float32)
+            if bx0 < px < bx1 and by0 < py < by1:
+                dexit = np.inf
+                for j in range(nbg):
+                    if ux[j] > 0.0:
+                        dexit = min(dexit, (bx1 - px) / ux[j])
+                    elif ux[j] < 0.0:
+                        dexit = min(dexit, (bx0 - px) / ux[j])
+                    if uy[j] > 0.0:
+                        dexit = min(dexit, (by1 - py) / uy[j])
+                    elif uy[j] < 0.0:
+                        dexit = min(dexit, (by0 - py) / uy[j])
+                dsafe = 0.999 * dexit - 1e-6 * (abs(px) + abs(py) + 1.0)
+                while k0 < K and ds[k0] < dsafe:
+                    k0 += 1
+                for k in range(k0):
+                    d = ds[k]
+                    off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
+                    w32 = np.int32(w)
+                    # _bilinear in three loops: cells (vector code), the four reads (a loop
+                    # of loads only: without gathers, loads through computed indices keep a
+                    # loop scalar), the blend and running maximum (vector code)
+                    for j in range(nbg):
+                        x = px + d * ux[j]
+                        y = py + d * uy[j]
+                        i, fc, fr = _bilinear_cell(off, h, w, icx, icy, left, top, x, y)
+                        IX[j] = i
+                        FC[j] = fc
+                        FR[j] = fr
+                    for j in range(nbg):
+                        i = IX[j]
+                        Z4[0, j] = load_i32(data, i)
+                        Z4[1, j] = load_i32(data, i + 1)
+                        Z4[2, j] = load_i32(data, i + w32)
+                        Z4[3, j] = load_i32(data, i + w32 + 1)
+                    for j in range(nbg):
+                        fc = FC[j]
+                        z00 = Z4[0, j]
+                        z10 = Z4[2, j]
+                        top_ = z00 + fc * (Z4[1, j] - z00)
+                        bot = z10 + fc * (Z4[3, j] - z10)
+                        z = top_ + FR[j] * (bot - top_)
+                        a = (z - pz) / d
+                        am = max(amax[j], a)
+                        amax[j] = am
+                        A0[j] = am
+                        A1[j] = z
+                    for j in range(nbg):
+                        AZ[k, b0 + j, 0] = A0[j]
+                        AZ[k, b0 + j, 1] = A1[j]
+                if k0 > 0:
+                    for j in range(nbg):
+                        state[j] = 1
+            live = nbg
+            for k in range(k0, K):
+                if live == 0:
+                    break
                 d = ds[k]
                 off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
                 for j in range(nbg):
+                    st = state[j]
+                    if st == 2:
+                        continue
                     x = px + d * ux[j]
                     y = py + d * uy[j]
+                    b = b0 + j
+                    if x < bx0 or x > bx1 or y < by0 or y > by1:
+                        if st == 1:
+                            state[j] = 2
+                            kend[b] = k
+                            live -= 1
+                            continue
+                        AZ[k, b, 0] = amax[j]
+                        AZ[k, b, 1] = np.inf
+                        continue
+                    state[j] = 1
                     z = _bilinear(data, off, h, w, icx, icy, left, top, x, y)
                     a = (z - pz) / d
-                    am = max(amax[j], a)
-                    amax[j] = am
-                    A0[j] = am
-                    A1[j] = z
-                for j in range(nbg):
-                    AZ[k, b0 + j, 0] = A0[j]
-                    AZ[k, b0 + j, 1] = A1[j]
-            if k0 > 0:
-                for j in range(nbg):
-                    state[j] = 1
-        live = nbg
-        for k in range(k0, K):
-            if live == 0:
-                break
-            d = ds[k]
-            off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
-            for j in range(nbg):
-                st = state[j]
-                if st == 2:
-                    continue
-                x = px + d * ux[j]
-                y = py + d * uy[j]
-                b = b0 + j
-                if x < bx0 or x > bx1 or y < by0 or y > by1:
-                    if st == 1:
-                        state[j] = 2
-                        kend[b] = k
-                        live -= 1
-                        continue
+                    if a > amax[j]:
+                        amax[j] = a
                     AZ[k, b, 0] = amax[j]
-                    AZ[k, b, 1] = np.inf
-                    continue
-                state[j] = 1
-                z = _bilinear(data, off, h, w, icx, icy, left, top, x, y)
-                a = (z - pz) / d
-                if a > amax[j]:
-                    amax[j] = a
-                AZ[k, b, 0] = amax[j]
-                AZ[k, b, 1] = z
+                    AZ[k, b, 1] = z
 
 
 @numba.njit(cache=True, inline="always")
@@ -409,153 +453,165 @@ def _bisect_first(AZ, b, s, lo, hi):
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _pixels(
     packed, R, px, py, pz, fx, fy, cx, cy, width, height,
-    th_ref, th_lo, dth, nb, bcos, bsin, ds, lv, AZ, kend, iters, z_below, t_out, lev_out,
+    th_ref, th_lo, dth, nb, bcos, bsin, ds, lv, AZ, kend, iters, z_below, t_out, lev_out, nwork,
 ):  # fmt: skip
     data, offs, hs, ws, cxs, cys, left, top = packed
     two_pi = 2.0 * math.pi
-    for r in numba.prange(height):
+    counter = np.zeros(1, np.int64)  # the next row (render/row_queue.py)
+    for _w in numba.prange(nwork):
         S = np.empty(width)
         RHO = np.empty(width)
         UX = np.empty(width)
         UY = np.empty(width)
-        BIN = np.empty(width, np.int64)
+        BIN = np.empty(width, np.int32)
         KK = np.empty(width, np.int64)
-        # pass 1: ray slope, horizontal direction and azimuth bin (branch-free)
-        for c in range(width):
-            dx, dy, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
-            rho = math.sqrt(dx * dx + dy * dy)
-            rr = 1.0 / max(rho, 1e-30)
-            S[c] = dz * rr
-            RHO[c] = rho
-            UX[c] = dx * rr
-            UY[c] = dy * rr
-            delta = _atan2(dy, dx) - th_ref
-            delta = delta - two_pi if delta > math.pi else delta
-            delta = delta + two_pi if delta <= -math.pi else delta
-            bf = (delta - th_lo) / dth
-            bf = min(max(bf, 0.0), nb - 1.0)
-            BIN[c] = int(bf)
-        # pass 2: first profile sample at or above each ray (from the left neighbour's)
-        kprev = 0
-        for c in range(width):
-            KK[c] = -1
-            if RHO[c] < 1e-7:
-                continue
-            b = BIN[c]
-            s = S[c]
-            ke = kend[b]
-            if ke == 0 or AZ[ke - 1, b, 0] < s:
-                continue
-            k = min(kprev, ke - 1)
-            if AZ[k, b, 0] >= s:
-                if k > 0 and AZ[k - 1, b, 0] >= s:
+        r = -1
+        r_end = 0
+        while True:
+            r += 1
+            if r >= r_end:  # the next _ROWS rows from the queue
+                r = fetch_add(counter, _ROWS)
+                r_end = min(r + _ROWS, height)
+            if r >= height:
+                break
+            # pass 1: ray slope, horizontal direction and azimuth bin (branch-free)
+            for c in range(width):
+                dx, dy, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
+                rho = math.sqrt(dx * dx + dy * dy)
+                rr = 1.0 / max(rho, 1e-30)
+                S[c] = dz * rr
+                RHO[c] = rho
+                UX[c] = dx * rr
+                UY[c] = dy * rr
+                delta = _atan2(dy, dx) - th_ref
+                delta = delta - two_pi if delta > math.pi else delta
+                delta = delta + two_pi if delta <= -math.pi else delta
+                bf = (delta - th_lo) / dth
+                bf = min(max(bf, 0.0), nb - 1.0)
+                BIN[c] = np.int32(bf)  # bf >= 0: truncation (int32 converts in vector code)
+            # pass 2: first profile sample at or above each ray (from the left neighbour's)
+            kprev = 0
+            for c in range(width):
+                KK[c] = -1
+                if RHO[c] < 1e-7:
+                    continue
+                b = BIN[c]
+                s = S[c]
+                ke = kend[b]
+                if ke == 0 or AZ[ke - 1, b, 0] < s:
+                    continue
+                k = min(kprev, ke - 1)
+                if AZ[k, b, 0] >= s:
+                    if k > 0 and AZ[k - 1, b, 0] >= s:
+                        step = 1
+                        lo = k
+                        while lo > 0 and AZ[lo - 1, b, 0] >= s:
+                            nxt = max(lo - step, 0)
+                            if AZ[nxt, b, 0] >= s:
+                                lo = nxt
+                                step *= 2
+                            else:
+                                lo = _bisect_first(AZ, b, s, nxt, lo)
+                                break
+                        k = lo
+                else:
                     step = 1
-                    lo = k
-                    while lo > 0 and AZ[lo - 1, b, 0] >= s:
-                        nxt = max(lo - step, 0)
-                        if AZ[nxt, b, 0] >= s:
-                            lo = nxt
-                            step *= 2
+                    a_ = k
+                    b_ = min(k + 1, ke - 1)
+                    while AZ[b_, b, 0] < s:
+                        a_ = b_
+                        step *= 2
+                        b_ = min(b_ + step, ke - 1)
+                    k = _bisect_first(AZ, b, s, a_, b_)
+                kprev = k
+                KK[c] = k
+            # pass 3: the crossing between samples k - 1 and k
+            for c in range(width):
+                i = r * width + c
+                t_out[i] = np.inf
+                lev_out[i] = -1
+                rho = RHO[c]
+                if rho < 1e-7:
+                    _, _, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
+                    if dz < 0.0:  # straight down
+                        z = _bilinear(
+                            data, offs[0], hs[0], ws[0], cxs[0], cys[0], left, top, px, py
+                        )
+                        t_out[i] = (pz - z) / -dz
+                        lev_out[i] = 0
+                    continue
+                k = KK[c]
+                if k < 0:
+                    continue
+                b = BIN[c]
+                s = S[c]
+                ux = UX[c]
+                uy = UY[c]
+                ke = kend[b]
+                # the crossing on the bin's centre azimuth, between samples k - 1 and k (where
+                # A first reaches s: g_(k-1) < 0 <= g_k), linear between them
+                d_hi = ds[k]
+                g_hi = AZ[k, b, 1] - (pz + s * d_hi)
+                if k > 0:
+                    d_lo = ds[k - 1]
+                    g_lo = AZ[k - 1, b, 1] - (pz + s * d_lo)
+                else:
+                    d_lo = 0.0
+                    g_lo = z_below - pz
+                if g_lo > 0.0:
+                    g_lo = 0.0
+                if g_hi < 0.0:
+                    g_hi = 0.0
+                den = g_hi - g_lo
+                dm = d_hi if den <= 0.0 else d_lo - g_lo * (d_hi - d_lo) / den
+                if iters > 0 and den > 0.0:
+                    # Illinois regula falsi on the pixel's own ray and the bilinear surface of
+                    # the step's level, when the bin's bracket also brackets the own ray
+                    ubx = ux
+                    uby = uy
+                    lev = lv[k]
+                    g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
+                    g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
+                    # a few samples forward or back until the own ray is bracketed
+                    kh = k
+                    kl = k - 1
+                    for _ in range(4):
+                        if g_hi < 0.0 and kh + 1 < ke:
+                            kh += 1
+                            kl += 1
+                            d_lo = d_hi
+                            g_lo = g_hi
+                            d_hi = ds[kh]
+                            g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
+                        elif g_lo >= 0.0 and kl > 0:
+                            kh -= 1
+                            kl -= 1
+                            d_hi = d_lo
+                            g_hi = g_lo
+                            d_lo = ds[kl]
+                            g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
                         else:
-                            lo = _bisect_first(AZ, b, s, nxt, lo)
                             break
-                    k = lo
-            else:
-                step = 1
-                a_ = k
-                b_ = min(k + 1, ke - 1)
-                while AZ[b_, b, 0] < s:
-                    a_ = b_
-                    step *= 2
-                    b_ = min(b_ + step, ke - 1)
-                k = _bisect_first(AZ, b, s, a_, b_)
-            kprev = k
-            KK[c] = k
-        # pass 3: the crossing between samples k - 1 and k
-        for c in range(width):
-            i = r * width + c
-            t_out[i] = np.inf
-            lev_out[i] = -1
-            rho = RHO[c]
-            if rho < 1e-7:
-                _, _, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
-                if dz < 0.0:  # straight down
-                    z = _bilinear(data, offs[0], hs[0], ws[0], cxs[0], cys[0], left, top, px, py)
-                    t_out[i] = (pz - z) / -dz
-                    lev_out[i] = 0
-                continue
-            k = KK[c]
-            if k < 0:
-                continue
-            b = BIN[c]
-            s = S[c]
-            ux = UX[c]
-            uy = UY[c]
-            ke = kend[b]
-            # the crossing on the bin's centre azimuth, between samples k - 1 and k (where
-            # A first reaches s: g_(k-1) < 0 <= g_k), linear between them
-            d_hi = ds[k]
-            g_hi = AZ[k, b, 1] - (pz + s * d_hi)
-            if k > 0:
-                d_lo = ds[k - 1]
-                g_lo = AZ[k - 1, b, 1] - (pz + s * d_lo)
-            else:
-                d_lo = 0.0
-                g_lo = z_below - pz
-            if g_lo > 0.0:
-                g_lo = 0.0
-            if g_hi < 0.0:
-                g_hi = 0.0
-            den = g_hi - g_lo
-            dm = d_hi if den <= 0.0 else d_lo - g_lo * (d_hi - d_lo) / den
-            if iters > 0 and den > 0.0:
-                # Illinois regula falsi on the pixel's own ray and the bilinear surface of
-                # the step's level, when the bin's bracket also brackets the own ray
-                ubx = ux
-                uby = uy
-                lev = lv[k]
-                g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
-                g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
-                # a few samples forward or back until the own ray is bracketed
-                kh = k
-                kl = k - 1
-                for _ in range(4):
-                    if g_hi < 0.0 and kh + 1 < ke:
-                        kh += 1
-                        kl += 1
-                        d_lo = d_hi
-                        g_lo = g_hi
-                        d_hi = ds[kh]
-                        g_hi = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_hi)
-                    elif g_lo >= 0.0 and kl > 0:
-                        kh -= 1
-                        kl -= 1
-                        d_hi = d_lo
-                        g_hi = g_lo
-                        d_lo = ds[kl]
-                        g_lo = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, d_lo)
-                    else:
-                        break
-                if g_lo < 0.0 <= g_hi:
-                    side = 0
-                    for _ in range(iters):
+                    if g_lo < 0.0 <= g_hi:
+                        side = 0
+                        for _ in range(iters):
+                            dm = (d_lo * g_hi - d_hi * g_lo) / (g_hi - g_lo)
+                            gm = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, dm)
+                            if gm >= 0.0:
+                                d_hi = dm
+                                g_hi = gm
+                                if side == 1:
+                                    g_lo *= 0.5
+                                side = 1
+                            else:
+                                d_lo = dm
+                                g_lo = gm
+                                if side == -1:
+                                    g_hi *= 0.5
+                                side = -1
                         dm = (d_lo * g_hi - d_hi * g_lo) / (g_hi - g_lo)
-                        gm = _ray_gap(packed, lev, px, py, pz, ubx, uby, s, dm)
-                        if gm >= 0.0:
-                            d_hi = dm
-                            g_hi = gm
-                            if side == 1:
-                                g_lo *= 0.5
-                            side = 1
-                        else:
-                            d_lo = dm
-                            g_lo = gm
-                            if side == -1:
-                                g_hi *= 0.5
-                            side = -1
-                    dm = (d_lo * g_hi - d_hi * g_lo) / (g_hi - g_lo)
-            t_out[i] = dm / rho
-            lev_out[i] = lv[k]
+                t_out[i] = dm / rho
+                lev_out[i] = lv[k]
 
 
 # ----------------------------------------------------------------------------------------
@@ -657,7 +713,10 @@ def trace_heightfield(
     AZ = np.empty((K, nb, 2), np.float32)
     kend = np.empty(nb, np.int64)
     bx0, by0, bx1, by1 = float(left), float(bottom), float(right), float(top)
-    _profiles(packed, px, py, pz, th_ref + th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend)
+    nwork = workers()
+    _profiles(
+        packed, px, py, pz, th_ref + th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, nwork
+    )
     bth = th_ref + th_lo + (np.arange(nb) + 0.5) * dth
     bcos, bsin = np.cos(bth), np.sin(bth)
     n = width * height
@@ -666,7 +725,7 @@ def trace_heightfield(
     _pixels(
         packed, R, px, py, pz, float(fx), float(fy), float(cx), float(cy), int(width),
         int(height), th_ref, th_lo, dth, nb, bcos, bsin, ds, lv, AZ, kend, int(iters), z_below,
-        t, lev,
+        t, lev, nwork,
     )  # fmt: skip
     return TraceResult(
         t=t, level=lev, bins=nb, steps=K, R_WC=R, intrinsics=(fx, fy, cx, cy, width, height)

@@ -341,6 +341,30 @@ def load_i32(typingctx, arr, k):
     return arr.dtype(arr, k), codegen
 
 
+@intrinsic
+def load_pair_f32(typingctx, arr, k):
+    """``(arr[k], arr[k + 1])`` of a contiguous float32 array (flat index, 32 bits, no
+    wraparound; the caller guarantees ``0 <= k`` and ``k + 1 < arr.size``) as one 64-bit
+    load: a loop of table reads issues half the loads."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.float32):
+        return None
+
+    def codegen(context, builder, signature, args):
+        a, kk = args
+        ary = context.make_array(signature.args[0])(context, builder, value=a)
+        i32 = ir.IntType(32)
+        if kk.type.width > 32:
+            kk = builder.trunc(kk, i32)
+        ptr = builder.gep(ary.data, [builder.sext(kk, ir.IntType(64))], inbounds=True)
+        vty = ir.VectorType(ir.FloatType(), 2)
+        v = builder.load(builder.bitcast(ptr, vty.as_pointer()), align=4)
+        lo = builder.extract_element(v, ir.Constant(i32, 0))
+        hi = builder.extract_element(v, ir.Constant(i32, 1))
+        return context.make_tuple(builder, signature.return_type, (lo, hi))
+
+    return types.UniTuple(types.float32, 2)(arr, k), codegen
+
+
 _gu_lo, _gv_lo, _a_lo = _field(0, 6), _field(6, 6), _field(12, 4)
 _gu_hi, _gv_hi, _a_hi = _field(16, 6), _field(22, 6), _field(28, 4)
 

@@ -56,6 +56,7 @@ import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.errors import ConfigError, OutOfRangeError, format_value
+from lunar_drake.render.row_queue import fetch_add, workers
 
 H_PLANCK = 6.62607015e-34
 """Planck constant (J s, exact SI)."""
@@ -416,6 +417,7 @@ def expose(
                 16 - params.adc_bits if params.msb_aligned else 0,
                 out,
                 bad,
+                workers(),
             )
     if bad.any():
         _raise_bad_input(L, radiance_scale, params, t)
@@ -482,6 +484,7 @@ _LO16 = np.uint64(0xFFFF)
 _NORMAL_SCALE = float(1.0 / np.sqrt(4.0 * (65536.0**2 - 1.0) / 12.0))
 _INV_2_53 = 1.0 / float(1 << 53)
 _GROUP = 32
+_ROWS = 8  # rows a worker takes from the queue at a time
 
 
 @numba.njit(cache=True, inline="always")
@@ -584,14 +587,18 @@ def _row_adc(n_e, hi, kr, full_well, read_noise, conv, black, max_code, shift, o
 
 
 @numba.njit(parallel=True, cache=True, fastmath=False)
-def _expose_kernel(
-    L, scale, keys, rate, dark_e, full_well, read_noise, conv, black, max_code, shift, out, bad
-):  # pragma: no cover - compiled
-    """Raw codes for L (channels, rows, cols) into out; bad[r] counts invalid pixels."""
+def _expose_kernel(  # pragma: no cover - compiled
+    L, scale, keys, rate, dark_e, full_well, read_noise, conv, black, max_code, shift, out, bad,
+    nwork,
+):  # fmt: skip
+    """Raw codes for L (channels, rows, cols) into out; bad[r] counts invalid pixels. Rows
+    go to ``nwork`` workers through a queue (:mod:`lunar_drake.render.row_queue`); every
+    pixel's draws come from its own counters, so the output does not depend on which
+    worker takes a row."""
     nch, rows, cols = L.shape
     thr = POISSON_EXACT_BELOW
-    for r in numba.prange(rows):
-        hi = np.uint64(r) << np.uint64(32)
+    counter = np.zeros(1, np.int64)  # the next row (render/row_queue.py)
+    for _w in numba.prange(nwork):
         lam_row = np.empty(cols)
         n_row = np.empty(cols)
         idx = np.empty(cols, dtype=np.int64)
@@ -600,23 +607,33 @@ def _expose_kernel(
         p = np.empty(cols)
         cdf = np.empty(cols)
         k = np.empty(cols, dtype=np.int64)
-        nbad = 0
-        for ch in range(nch):
-            nbad += _row_gauss(L[ch, r], scale, hi, keys[ch, 1], rate, dark_e, lam_row, n_row)
-            m = 0
-            for c in range(cols):  # branch-free compaction
-                idx[m] = c
-                m += lam_row[c] < thr
-            if m > 0:
-                _row_poisson(
-                    idx[:m], lam_row, hi, keys[ch, 0], u[:m], lam[:m], p[:m], cdf[:m], k[:m],
-                    n_row,
+        r = -1
+        r_end = 0
+        while True:
+            r += 1
+            if r >= r_end:  # the next _ROWS rows from the queue
+                r = fetch_add(counter, _ROWS)
+                r_end = min(r + _ROWS, rows)
+            if r >= rows:
+                break
+            hi = np.uint64(r) << np.uint64(32)
+            nbad = 0
+            for ch in range(nch):
+                nbad += _row_gauss(L[ch, r], scale, hi, keys[ch, 1], rate, dark_e, lam_row, n_row)
+                m = 0
+                for c in range(cols):  # branch-free compaction
+                    idx[m] = c
+                    m += lam_row[c] < thr
+                if m > 0:
+                    _row_poisson(
+                        idx[:m], lam_row, hi, keys[ch, 0], u[:m], lam[:m], p[:m], cdf[:m], k[:m],
+                        n_row,
+                    )  # fmt: skip
+                _row_adc(
+                    n_row, hi, keys[ch, 2], full_well, read_noise, conv, black, max_code, shift,
+                    out[ch, r],
                 )  # fmt: skip
-            _row_adc(
-                n_row, hi, keys[ch, 2], full_well, read_noise, conv, black, max_code, shift,
-                out[ch, r],
-            )  # fmt: skip
-        bad[r] = nbad
+            bad[r] = nbad
 
 
 # ----------------------------------------------------------------------------- numpy reference
