@@ -225,7 +225,7 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
         (1, scene["frame"](1, pose_matrix(true1), est1)),
     ]
     cfg = PerceptionConfig(odom_sigma_fraction=0.1, vo_sigma_m=0.01, keyframe_m=0.5,
-                           vo_scale_sigma=0.0)  # fmt: skip
+                           vo_scale_sigma=0.0, odom_sigma_per_rad_m=0.0)  # fmt: skip
     st = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
                          config=cfg, **scene["kw"])  # fmt: skip
     first, rec = st.records.items()
@@ -272,6 +272,12 @@ def test_vo_pulls_the_ground_pose_toward_the_truth_when_the_onboard_estimate_sli
     assert st2.records.items()[-1].vo == "off"
     np.testing.assert_allclose(planar_correction(st2.correction), 0.0, atol=1e-9)
     assert st2.records.items()[-1].sigma_m == pytest.approx(sig_o, rel=1e-12)  # odometry's
+    # the odometry's sigma grows with the turn (3 deg here) by odom_sigma_per_rad_m
+    st3 = perception_step(PerceptionState(costmap=scene["prior"]), frames, prior=scene["dem"],
+                          config=dc.replace(cfg, use_vo=False, odom_sigma_per_rad_m=0.5),
+                          **scene["kw"])  # fmt: skip
+    assert st3.records.items()[-1].sigma_m == pytest.approx(sig_o + 0.5 * math.radians(3.0),
+                                                            rel=1e-9)  # fmt: skip
 
 
 def test_frames_taken_while_the_gimbal_moved_or_without_a_header_are_skipped(scene):

@@ -289,6 +289,25 @@ def test_a_goal_is_judged_with_the_estimates_own_sigma(sigma, reached):
         assert g.state.status == ("active",) and g.state.replans == 1
 
 
+def test_a_final_approach_is_not_asked_for_when_it_cannot_help():
+    """Within goal_tolerance_m but outside the sigma-shrunk radius: a goal the planner
+    moved off a hazard (the path ends 0.5 m short of it) is reached once the rover stands
+    at the path's end, and any goal is reached once the replans are spent. The radius
+    stays within goal_tolerance_m and treats a NaN sigma as 0."""
+    p = OperatorParams()
+    assert reach_radius_m(p, math.nan) == pytest.approx(1.0)
+    assert reach_radius_m(OperatorParams(goal_tolerance_m=0.25, goto_tolerance_m=0.2), 0.0) == 0.25
+    g = Ground()
+    g.planner = lambda start, goal: [tuple(start), (goal[0] - 0.5, goal[1])]
+    g.tick(0.0, Request("goal", (10.0, 0.0)), sigma_m=0.6)
+    g.telemetry(30.0, xy=(9.45, 0.0), mode="waiting", motion_seq=g.goto_seq())
+    assert g.tick(30.1, sigma_m=0.6) == [] and g.state.status == ("reached",)
+    g = Ground(params=OperatorParams(max_replans=0))
+    g.tick(0.0, Request("goal", (10.0, 0.0)), sigma_m=0.6)
+    g.telemetry(30.0, xy=(9.2, 0.0), mode="waiting", motion_seq=g.goto_seq())
+    assert g.tick(30.1, sigma_m=0.6) == [] and g.state.status == ("reached",)
+
+
 def test_a_goal_fails_after_max_replans_or_when_the_planner_refuses_it():
     g = Ground(params=OperatorParams(max_replans=2), fail_goals={(5.0, 5.0)})
     g.tick(0.0, Request("goal", (10.0, 0.0)), Request("goal", (5.0, 5.0)),

@@ -12,7 +12,9 @@ returns the commands to send up:
   ground's estimate is within ``goal_tolerance_m`` less its own position sigma (never
   less than ``goto_tolerance_m`` + 0.1 m: :func:`reach_radius_m`), else the ground
   replans a final approach from the estimate (at most ``max_replans`` times, then the
-  goal is ``failed``). While the
+  goal is ``failed``); within ``goal_tolerance_m`` but not that radius, it is reached
+  when a final approach cannot help (the rover at the planned end, a goal moved off a
+  hazard, or the replans spent). While the
   rover drives, an estimate more than ``replan_deviation_m`` off the planned path
   makes the ground stop it and replan. A goal added while driving waits its turn.
 * **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
@@ -208,12 +210,16 @@ def goal_shift_limit_m(params) -> float:
 
 def reach_radius_m(params, sigma_m: float) -> float:
     """How near (m) the ground's estimate must be to a goal for the ground to call it
-    reached: the scored ``goal_tolerance_m`` less the estimate's own position sigma
-    ``sigma_m`` (m, per axis), so a goal judged reached on an estimate that is one sigma
-    off still is; never less than what the rover can park to (``goto_tolerance_m`` +
-    0.1 m)."""
-    return max(params.goal_tolerance_m - max(float(sigma_m), 0.0),
-               params.goto_tolerance_m + 0.1)  # fmt: skip
+    reached at once: the scored ``goal_tolerance_m`` less the estimate's own position
+    sigma ``sigma_m`` (m, per axis; NaN counts as 0), so a goal judged reached on an
+    estimate one sigma off (along the way to it) still is; never less than what the
+    rover can park to (``goto_tolerance_m`` + 0.1 m), never more than
+    ``goal_tolerance_m``. Farther, :func:`operator_step` plans a final approach, unless
+    the rover already stands at the planned end (a goal the planner moved off a hazard)
+    or the replans are spent: then ``goal_tolerance_m`` decides."""
+    sig = float(sigma_m) if math.isfinite(sigma_m) else 0.0
+    tol = params.goal_tolerance_m
+    return min(tol, max(tol - max(sig, 0.0), params.goto_tolerance_m + 0.1))
 
 
 def onboard_points(points_xy, correction) -> tuple:
@@ -453,7 +459,12 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
                     start_next()
         elif acked and mode in ("waiting", "idle"):
             err = math.hypot(pose[0] - goals[active][0], pose[1] - goals[active][1])
-            if err <= reach_radius_m(params, sigma_m):
+            end = path[-1] if path else goals[active]
+            at_end = math.hypot(pose[0] - end[0], pose[1] - end[1]) <= params.goto_tolerance_m + 0.1
+            approach_futile = at_end or replans >= params.max_replans
+            if err <= reach_radius_m(params, sigma_m) or (
+                approach_futile and err <= params.goal_tolerance_m
+            ):
                 status = _set(status, active, "reached")
                 note("goal_reached", f"{active}: estimate {err:.2f} m from it")
                 start_next()

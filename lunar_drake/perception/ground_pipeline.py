@@ -14,7 +14,8 @@ the on-board pose estimate and the gimbal angles at capture):
   keyframe's from the on-board motion between the two (``T_odom``).
 * **fusion** (the ground's filter): the camera's motion between keyframes is the
   inverse-variance mean of the on-board translation (sigma ``odom_sigma_fraction`` x
-  distance + ``odom_sigma_min_m``, grown by the slip VO shows) and the VO translation
+  distance + ``odom_sigma_per_rad_m`` x turn + ``odom_sigma_min_m``, grown by the slip
+  VO shows) and the VO translation
   (sigma ``vo_sigma_m``), the rotation the on-board one (star tracker: arcseconds). A
   rejected alignment leaves the on-board motion, as does one further from the
   on-board step than ``vo_gate_sigmas`` combined sigmas in a way slip cannot explain
@@ -26,7 +27,8 @@ the on-board pose estimate and the gimbal angles at capture):
   approximation. The ground's position variance grows by each link's fused variance
   (``1 / (1 / sigma_odom^2 + 1 / sigma_vo^2)``, or the on-board one alone), and a
   systematic part, ``vo_scale_sigma`` of each fused step, adds up linearly (a scale
-  error does not average out), so ``sigma_m = sqrt(var + sys^2)`` says how far, one
+  error does not average out; it grows with the net displacement, as a vector), so
+  ``sigma_m = sqrt(var + |sys|^2)`` says how far, one
   sigma per axis, the ground's pose may have wandered since the first keyframe.
 * **mapping**: the cloud, in the ground's estimated frame, fused into a local
   elevation map (:mod:`~lunar_drake.perception.elevation_map`, a ``window_m`` square
@@ -77,12 +79,18 @@ class PerceptionConfig:
             autonomy benchmark's orbital-map runs VO and the on-board step differed by
             3.7 % of the step (median; 10 % at the 90th percentile) while VO's own link
             error is 1-2 cm (vo-study): the difference is the odometry's (slip).
+        odom_sigma_per_rad_m: the on-board translation's sigma grows by this much per
+            radian the camera turned between keyframes (m/rad): turning in place the
+            wheels scrub and the odometry's camera step is poor (autonomy benchmark,
+            orbital map: 0.315 m on board against 0.094 m true over a 0.28 rad turn,
+            where VO's 0.149 m was gated as too far from the odometry).
         vo_sigma_m: VO translation sigma per keyframe link (m; vo-study's straight
             drives: 6-11 cm over 19 links of 1 m).
         vo_scale_sigma: VO's unmodelled scale error, a fraction of each fused step
-            (its sigma adds linearly over the drive; 0.007: the default mission's VO
-            steps were 0.7 % longer than the true camera steps, median of 59 links,
-            after the symmetric stereo matching).
+            (fully correlated: it adds as a vector of the steps, so it grows with the
+            net displacement; 0.007: on the default mission with the symmetric stereo
+            matching VO's steps were 0.45 % (61 links) and 0.7 % (59 links, ``hh``)
+            longer than the true camera steps, medians).
         vo_gate_sigmas: an accepted alignment whose translation differs from the
             on-board one by more than this many combined sigmas, in a way slip cannot
             explain (:func:`innovation`), is not fused (the innovation gate; recorded
@@ -103,6 +111,7 @@ class PerceptionConfig:
     use_vo: bool = True
     odom_sigma_fraction: float = 0.05
     odom_sigma_min_m: float = 0.005
+    odom_sigma_per_rad_m: float = 0.5
     vo_sigma_m: float = 0.015
     vo_scale_sigma: float = 0.007
     vo_gate_sigmas: float = 3.0
@@ -121,6 +130,7 @@ class PerceptionConfig:
         check_range("window_m", self.window_m, 2.0 * self.max_range_m, 1000.0, unit=" m")
         check_range("odom_sigma_fraction", self.odom_sigma_fraction, 0.0, 1.0)
         check_range("odom_sigma_min_m", self.odom_sigma_min_m, 1e-6, 10.0, unit=" m")
+        check_range("odom_sigma_per_rad_m", self.odom_sigma_per_rad_m, 0.0, 100.0, unit=" m/rad")
         check_range("vo_sigma_m", self.vo_sigma_m, 1e-6, 10.0, unit=" m")
         check_range("vo_scale_sigma", self.vo_scale_sigma, 0.0, 1.0)
         check_range("vo_gate_sigmas", self.vo_gate_sigmas, 0.0, 1e6, lo_open=True)
@@ -174,7 +184,7 @@ class PerceptionState:
     key_X_WC_onboard: np.ndarray | None = None
     key_X_WC_ground: np.ndarray | None = None
     key_var_m2: float = 0.0
-    key_sys_m: float = 0.0
+    key_sys_xy: tuple = (0.0, 0.0)
     correction: np.ndarray = dc.field(default_factory=lambda: np.eye(4))
     emap: object = None
     costmap: object = None
@@ -188,7 +198,7 @@ class PerceptionState:
     def sigma_m(self) -> float:
         """The ground's position sigma (m, per axis) since the first keyframe: the
         random and the systematic parts (:class:`PerceptionConfig` ``vo_scale_sigma``)."""
-        return math.hypot(math.sqrt(self.key_var_m2), self.key_sys_m)
+        return math.hypot(math.sqrt(self.key_var_m2), math.hypot(*self.key_sys_xy))
 
 
 def pose_matrix(pose6) -> np.ndarray:
@@ -333,14 +343,16 @@ def perception_step(
         intensity = res.left_8bit[near].astype(np.float64) / 255.0
         vo, reason, fit, rmse, cond = "none", "", math.nan, math.nan, math.nan
         odom_step = vo_step = diff = math.nan
-        var, sys_m = s.key_var_m2, s.key_sys_m
+        var, sys_xy = s.key_var_m2, s.key_sys_xy
         if first:
             X_WC_ground = s.correction @ X_WC_onboard
         else:
             T_odom = np.linalg.inv(s.key_X_WC_onboard) @ X_WC_onboard
             T = T_odom.copy()
             odom_step = float(np.linalg.norm(T_odom[:3, 3]))
-            sig_o = config.odom_sigma_fraction * odom_step + config.odom_sigma_min_m
+            turn_rad = math.radians(_moved(s.key_X_WC_onboard, X_WC_onboard)[1])
+            sig_o = (config.odom_sigma_fraction * odom_step + config.odom_sigma_per_rad_m * turn_rad
+                     + config.odom_sigma_min_m)  # fmt: skip
             step_var = sig_o**2
             if config.use_vo:
                 al = align(s.key_cloud, cloud, init_T=T_odom, config=config.vo,
@@ -362,7 +374,11 @@ def perception_step(
                                                 sigma_odom_m=sig_slip,
                                                 sigma_vo_m=config.vo_sigma_m)  # fmt: skip
                     step_var = 1.0 / (1.0 / sig_slip**2 + 1.0 / config.vo_sigma_m**2)
-                    sys_m += config.vo_scale_sigma * float(np.linalg.norm(T[:3, 3]))
+                    # A scale error moves the pose along the net displacement: the
+                    # systematic part adds as a vector (it cancels on a return leg).
+                    d_W = s.key_X_WC_ground[:3, :3] @ T[:3, 3]
+                    sys_xy = (sys_xy[0] + config.vo_scale_sigma * float(d_W[0]),
+                              sys_xy[1] + config.vo_scale_sigma * float(d_W[1]))  # fmt: skip
             else:
                 vo = "off"
             X_WC_ground = s.key_X_WC_ground @ T
@@ -392,13 +408,13 @@ def perception_step(
             vo_step_m=vo_step, vo_minus_odom_m=diff, x_m=float(X_WB_ground[0, 3]),
             y_m=float(X_WB_ground[1, 3]),
             yaw_rad=math.atan2(X_WB_ground[1, 0], X_WB_ground[0, 0]),
-            sigma_m=math.hypot(math.sqrt(var), sys_m), new_lethal=new_lethal,
+            sigma_m=math.hypot(math.sqrt(var), math.hypot(*sys_xy)), new_lethal=new_lethal,
             **dict(zip(("correction_x_m", "correction_y_m", "correction_yaw_rad"),
                        planar_correction(correction), strict=True)),
         )  # fmt: skip
         s = dc.replace(
             s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,
-            key_X_WC_ground=X_WC_ground, key_var_m2=var, key_sys_m=sys_m, correction=correction,
+            key_X_WC_ground=X_WC_ground, key_var_m2=var, key_sys_xy=sys_xy, correction=correction,
             emap=emap,
             costmap=costmap,
             version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
