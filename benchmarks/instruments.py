@@ -5,9 +5,9 @@ neutron spectrometer matches the world model.
     .venv/bin/python benchmarks/instruments.py --duration 600 --out quick.json   # part of it
 
 Runs the ``prospect`` scenario (the default site, a lawn-mower of six 50 m lanes 10 m
-apart over about 2500 m^2, NSS records down the link's science channel; cameras off)
-and writes its run directory under ``--runs``. Two scores of the same 2 m map
-(``summary.json`` ``science``, :func:`lunar_drake.metrics.science`):
+apart over about 2500 m^2, NSS records down the link's science channel; the orbital map,
+stereo and VO, as the default mission) and writes its run directory under ``--runs``.
+Two scores of the same 2 m map (``summary.json`` ``science``, :func:`lunar_drake.metrics.science`):
 
 * ``world_r`` (the map against the world): over the cells the ground's map publishes
   (:func:`lunar_drake.science.products.nss_grid`: a cell's pooled counts, where at least
@@ -21,8 +21,9 @@ and writes its run directory under ``--runs``. Two scores of the same 2 m map
   at its true positions (:func:`lunar_drake.science.products.nss_truth`). Goal (issue
   15): r >= 0.9.
 
-Both are binned where the ground puts the records (the downlinked on-board estimate),
-so the placing error counts. ``area_m2`` is the lawn-mower's bounding box.
+Both are binned where the ground puts the records (the downlinked on-board estimate
+moved by the ground's VO correction), so the placing error counts. ``area_m2`` is the
+lawn-mower's bounding box.
 ``speed_index_s`` (``benchmarks/speed_index.py``: ``../shared/bench/speed_index.py`` run
 in a child of this process) dates the machine. Prints a table; writes JSON with --out.
 """

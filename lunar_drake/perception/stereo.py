@@ -11,9 +11,10 @@ disparity, validity and a point cloud in the left camera frame. Pure (numpy + Op
    wanted (``min_depth_m``): ``d_max = f B / min_depth``.
    With ``symmetric`` (the default), the frames are matched a second time upside down
    and the two disparities averaged: OpenCV's single-pass modes aggregate only along
-   paths from the rows above, which biases a ground plane's disparities low
-   (:class:`StereoConfig`).
-4. **Validity**: OpenCV's own invalid marks, left-right consistency
+   paths running down the image or along rows, which biases a ground plane's
+   disparities low (:class:`StereoConfig`).
+4. **Validity**: (with ``symmetric``, both passes valid and within 1 px of each other)
+   OpenCV's own invalid marks, left-right consistency
    (``disp12_max_diff``), uniqueness and speckle filtering. Both images are padded on
    the left by ``num_disparities`` columns before matching (OpenCV leaves that border
    of its input unmatched), so the left border keeps every point whose match lies in
@@ -50,16 +51,16 @@ class StereoConfig:
         disp12_max_diff: left-right consistency tolerance (px; < 0 off).
         pre_filter_cap: clip of the prefiltered image derivative.
         mode: ``sgbm`` (5 directions), ``hh`` (8 directions, full), ``3way``.
-        symmetric: also match both frames turned upside down and keep the mean of the
-            two disparities where both are valid and agree within 1 px. OpenCV's
-            single-pass modes (``sgbm``, ``3way``) aggregate costs only along paths that
-            come from the rows above; on a ground plane, whose disparity shrinks upward,
-            their smoothness term pulls every pixel toward its upper neighbours' smaller
-            disparity: on the default site at 640 x 480, ``sgbm`` alone measures
-            0.13-0.44 px short (1-2 % long in depth at 5-9 m, and visual odometry as
-            long), ``3way`` 0.05-0.17 px; either one with its flipped twin is within
-            0.05 px, as ``hh`` is, in about half ``hh``'s time for ``3way``. Ignored
-            by ``hh`` (its eight paths are symmetric already).
+        symmetric: also match both frames turned upside down and keep the mean of the two
+            disparities where both are valid and agree within 1 px. OpenCV's single-pass
+            modes (``sgbm``, ``3way``) aggregate costs only along paths that run down the
+            image or along the row, none upward; on a ground plane, whose disparity shrinks
+            upward, their smoothness term pulls every pixel toward its upper neighbours'
+            smaller disparity: on the default site at 640 x 480, ``sgbm`` alone measures
+            0.13-0.44 px short (1-2 % long in depth at 5-9 m, and visual odometry as long),
+            ``3way`` 0.05-0.17 px; either one with its flipped twin is within 0.05 px, as
+            ``hh`` is, in about half ``hh``'s time for ``3way``. Ignored by ``hh`` (its
+            eight paths are symmetric already).
         low_percentile, high_percentile: the 8-bit stretch (percent of codes).
         min_signal: pixels of the left frame darker than this fraction of the stretch's
             high code are not matched (deep shadow: noise, wrong disparities that agree
