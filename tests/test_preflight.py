@@ -225,3 +225,31 @@ def test_the_summary_names_the_map_and_the_calibration(small_site):
     # The plant's own soil named as the calibration: the summary says it is the oracle.
     assert cal["slip_calibration"] == "lunar_regolith" and cal["is_plant_soil"] is True
     assert cal["slip_vs_slope"][0] == [-8.0, pytest.approx(-0.0678, abs=2e-4)]
+
+
+def test_the_operator_judges_goals_with_the_perceptions_sigma(cache):
+    """With stereo and VO on (goto), the ground's perception hands the operator its
+    position sigma beside the correction; with VO off it hands neither."""
+    from lunar_drake.diagrams.mission import MakeMissionDiagram
+    from lunar_drake.site import load_site
+
+    for use_vo in (True, False):
+        text = f"{{ground: {{perception: {{use_vo: {str(use_vo).lower()}}}}}}}"
+        s = load_scenario(scenario_name="goto", scenario_text=text)
+        mission = MakeMissionDiagram(scenario=s, site=load_site(s, progress=False))
+        ground = mission.GetSubsystemByName("ground")
+        perception = ground.GetSubsystemByName("ground.perception")
+        operator = ground.GetSubsystemByName("ground.operator")
+        links = {
+            (dst.get_name(), dst_port): (src.get_name(), src_port)
+            for (dst, dst_port), (src, src_port) in ground.connection_map().items()
+        }
+        sigma = links.get(("ground.operator", operator.pose_sigma_input.get_index()))
+        correction = links.get(("ground.operator", operator.pose_correction_input.get_index()))
+        if use_vo:
+            assert sigma == ("ground.perception", perception.pose_sigma_output.get_index())
+            assert correction == (
+                "ground.perception", perception.pose_correction_output.get_index()
+            )
+        else:
+            assert sigma is None and correction is None
