@@ -36,6 +36,7 @@ import numpy as np
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
     lut_axis_f32,
+    lut_corner_f32,
     trilerp,
 )
 from lunar_drake.render.heightfield_trace import DemPyramid, pixel_direction, trace_heightfield
@@ -156,20 +157,9 @@ def _lut_cell_gie(tab, x, y, cg):
     """:func:`~lunar_drake.render.hapke_lut.lut_cell_f32` for the table stored phase
     first, ``tab[g, i, e]`` (:func:`lut_phase_major`): the same fractions, the flat
     int32 index of the (i0, j0, k0) corner in that layout."""
-    ng = tab.shape[0] - 1
     ni = tab.shape[1] - 1
     ne = tab.shape[2] - 1
-    one = np.float32(1.0)
-    h = np.float32(0.5) * (one - cg)
-    h = min(max(h, np.float32(0.0)), one)
-    z = np.float32(math.sqrt(np.float32(math.sqrt(h)))) * np.float32(ng)
-    # x, y, z >= 0: int32 truncation is int() (and vectorizes)
-    i0 = min(np.int32(x), np.int32(ni - 1))
-    j0 = min(np.int32(y), np.int32(ne - 1))
-    k0 = min(np.int32(z), np.int32(ng - 1))
-    fx = x - np.float32(i0)
-    fy = y - np.float32(j0)
-    fz = z - np.float32(k0)
+    i0, j0, k0, fx, fy, fz = lut_corner_f32(x, y, cg, ni, ne, tab.shape[0] - 1)
     k = (k0 * np.int32(ni + 1) + i0) * np.int32(ne + 1) + j0
     return k, fx, fy, fz
 

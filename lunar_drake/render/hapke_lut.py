@@ -27,6 +27,7 @@ __all__ = [
     "lut_axis",
     "lut_axis_f32",
     "lut_cell_f32",
+    "lut_corner_f32",
     "lut_reflectance",
     "lut_reflectance_at",
     "lut_reflectance_at_f32",
@@ -91,14 +92,11 @@ def lut_axis_f32(c, n):
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
-def lut_cell_f32(table, x, y, cg):
-    """The cell of :func:`lut_reflectance_at_f32` without reading the table: ``(k, fx,
-    fy, fz)``, the flat int32 index of its (i0, j0, k0) corner in the C-contiguous table
-    and the float32 fractions (vector code; the caller reads the eight corners at ``k``,
-    ``k + 1``, ``k + n_g``, ... and blends them with :func:`trilerp`)."""
-    ni = table.shape[0] - 1
-    ne = table.shape[1] - 1
-    ng = table.shape[2] - 1
+def lut_corner_f32(x, y, cg, ni, ne, ng):
+    """The table cell of float32 axes ``x`` (incidence), ``y`` (emission) and phase
+    cosine ``cg`` for a table of ``ni + 1`` x ``ne + 1`` x ``ng + 1`` nodes, whatever its
+    memory layout: the int32 corner ``(i0, j0, k0)`` and the float32 fractions ``(fx,
+    fy, fz)``."""
     one = np.float32(1.0)
     h = np.float32(0.5) * (one - cg)
     h = min(max(h, np.float32(0.0)), one)
@@ -107,9 +105,18 @@ def lut_cell_f32(table, x, y, cg):
     i0 = min(np.int32(x), np.int32(ni - 1))
     j0 = min(np.int32(y), np.int32(ne - 1))
     k0 = min(np.int32(z), np.int32(ng - 1))
-    fx = x - np.float32(i0)
-    fy = y - np.float32(j0)
-    fz = z - np.float32(k0)
+    return i0, j0, k0, x - np.float32(i0), y - np.float32(j0), z - np.float32(k0)
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def lut_cell_f32(table, x, y, cg):
+    """The cell of :func:`lut_reflectance_at_f32` without reading the table: ``(k, fx,
+    fy, fz)``, the flat int32 index of its (i0, j0, k0) corner in the C-contiguous table
+    and the float32 fractions (vector code; the caller reads the eight corners at ``k``,
+    ``k + 1``, ``k + n_g``, ... and blends them with :func:`trilerp`)."""
+    ne = table.shape[1] - 1
+    ng = table.shape[2] - 1
+    i0, j0, k0, fx, fy, fz = lut_corner_f32(x, y, cg, table.shape[0] - 1, ne, ng)
     k = (i0 * np.int32(ne + 1) + j0) * np.int32(ng + 1) + k0
     return k, fx, fy, fz
 
