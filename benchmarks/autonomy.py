@@ -18,7 +18,8 @@ mean_drift_pct, mean_position_nees, rtt_s, map`` and ``runs`` (``goal_xy, reache
 strikes, final_error_m, distance_m, drift_pct, position_nees, run_dir``; a goal the
 ground could not plan to on its map is ``reached: false`` with ``error``).
 ``position_nees``: the on-board EKF's horizontal position NEES over the run, its mean
-(2 for a consistent filter; ``metrics.position_nees``), scored on truth. Prints a table.
+(2 for a consistent filter; ``metrics.position_nees``), scored on truth;
+``speed_index_s`` (``benchmarks/speed_index.py``) dates the machine. Prints a table.
 """
 
 from __future__ import annotations
@@ -34,6 +35,11 @@ import numpy as np
 
 from lunar_drake import rng
 from lunar_drake.files import atomic_write_text, check_output_file
+
+try:
+    from benchmarks.speed_index import measure_speed_index, speed_index_line
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import measure_speed_index, speed_index_line
 
 
 def sample_goals(*, scenario, site, n: int, seed: int, r_min=30.0, r_max=60.0) -> list:
@@ -183,6 +189,9 @@ def main(argv=None) -> int:
         "scenario_text": a.scenario_text,
         "runs": rows,
     }
+    speed = measure_speed_index()
+    result["speed_index_s"] = speed["speed_index_s"]
+    result["speed_index"] = speed
     print(
         f"{'goal':>16} {'reached':>8} {'strikes':>8} {'final m':>8} {'driven m':>9} {'drift %':>8}"
         f" {'safed':>6} {'replans':>8} {'NEES xy':>8}"
@@ -204,6 +213,7 @@ def main(argv=None) -> int:
         f"mean position NEES {result['mean_position_nees']} (2: consistent), "
         f"rtt {result['rtt_s']} s ({a.map} map)"
     )
+    print(speed_index_line(speed))
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")
     return 0
