@@ -280,10 +280,14 @@ def modes(logs: SimulationLogs) -> dict:
 
 def ground(logs: SimulationLogs) -> dict:
     """The ground's own account: each goal it was given and its status as the ground
-    judged it from telemetry; counts of plans, replans and resumes."""
+    judged it from telemetry; when it had judged them all (``goals_judged_s``, None
+    while any is open); counts of plans, replans and resumes."""
     kinds = [e.kind for e in logs.ground_events]
+    judged = [e.t_s for e in logs.ground_events if e.kind in ("goal_reached", "goal_failed")]
+    done = bool(logs.ground_goals) and len(judged) >= len(logs.ground_goals)
     return {
         "goals": [{"goal_xy_m": [_r(g[0]), _r(g[1])], "status": st} for g, st in logs.ground_goals],
+        "goals_judged_s": _r(max(judged), 3) if done else None,
         "plans": kinds.count("plan"),
         "replans": sum(1 for e in logs.ground_events if e.kind == "plan" and "replan" in e.detail),
         "safings_seen": kinds.count("safed"),

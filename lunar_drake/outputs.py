@@ -192,6 +192,20 @@ def run_files() -> list[str]:
     ]
 
 
+def write_run_summary(out_dir: str | Path, *, scenario: Scenario, summary: dict,
+                      timing: dict) -> list[Path]:  # fmt: skip
+    """Writes a run's ``scenario.yaml``, ``summary.json`` and ``timing.json`` into
+    ``out_dir`` (atomically each); the part of :func:`write_run` a study keeps per case."""
+    out = Path(out_dir)
+    return [
+        atomic_write_text(out / "scenario.yaml", dump_scenario(scenario)),
+        atomic_write_text(
+            out / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n"
+        ),
+        atomic_write_text(out / "timing.json", json.dumps(timing, indent=2, sort_keys=True) + "\n"),
+    ]
+
+
 def write_run(
     out_dir: str | Path,
     *,
@@ -206,13 +220,7 @@ def write_run(
     their paths. ``site`` (the run's SiteData) puts the science maps over the site
     hillshade and writes them as GeoTIFFs."""
     out = Path(out_dir)
-    paths = [
-        atomic_write_text(out / "scenario.yaml", dump_scenario(scenario)),
-        atomic_write_text(
-            out / "summary.json", json.dumps(summary, indent=2, sort_keys=True) + "\n"
-        ),
-        atomic_write_text(out / "timing.json", json.dumps(timing, indent=2, sort_keys=True) + "\n"),
-    ]
+    paths = write_run_summary(out, scenario=scenario, summary=summary, timing=timing)
     for port, name in LOG_FILES.items():
         log = logs.vectors[port]
         rows = (

@@ -1,5 +1,6 @@
 """The ``lunar-drake`` command: one module per subcommand (``run``, ``scenarios``,
-``terrain synth``, ``plan``, ``world build``, ``render``, ``slip-study``, ``vo-study``,
+``terrain synth``, ``plan``, ``world build``, ``render``, ``trade``, ``slip-study``,
+``vo-study``,
 ``slip-fit``, ``ephemeris``, ``lightmap``), each with ``add_parser(sub)`` and
 ``command(args) -> int``; :func:`main` runs one and turns a
 :class:`~lunar_drake.errors.LunarDrakeError` into one line and exit status 2.
@@ -14,7 +15,7 @@ import sys
 from lunar_drake.errors import LunarDrakeError
 
 #: The subcommand modules, in the order ``lunar-drake --help`` lists them.
-COMMANDS = ("run", "scenarios", "plan", "render", "terrain", "world", "slip_study",
+COMMANDS = ("run", "scenarios", "plan", "render", "terrain", "world", "trade", "slip_study",
             "vo_study", "slip_fit", "ephemeris", "lightmap")  # fmt: skip
 
 DESCRIPTION = """\
