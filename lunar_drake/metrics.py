@@ -6,6 +6,7 @@ byte-identical for the same scenario and seed.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -309,6 +310,123 @@ def _perception(keyframes) -> dict:
     }
 
 
+#: A true hazard counts for detection when its cell lies within this distance (m) of
+#: the rover's true track.
+NEAR_PATH_M = 3.0
+
+
+def _truth_pose_at(pose, t: float) -> np.ndarray:
+    """(x, y, z, roll, pitch, yaw) of the truth log at time ``t`` (linear; yaw unwrapped)."""
+    cols = [np.interp(t, pose.times, pose.data[:, i]) for i in range(5)]
+    yaw = np.interp(t, pose.times, np.unwrap(pose.data[:, 5]))
+    return np.array([*cols, yaw])
+
+
+def vo_scores(*, scenario: Scenario, logs: SimulationLogs) -> dict:
+    """Stereo and VO against truth: mean fraction of pixels with a valid disparity;
+    ``vo_acceptance`` (accepted / tried: accepted, rejected or gated);
+    ``vo_error_per_m``: over the accepted links, the summed length of (VO's translation
+    - the true camera translation, both in the previous keyframe's camera frame) over
+    the summed true translation. The true camera pose is the true chassis pose at the
+    capture time (the truth log, interpolated) with the rover model's mast at the
+    frame's pan and tilt."""
+    from lunar_drake.perception.ground_pipeline import pose_matrix
+    from lunar_drake.systems.ground_perception import camera_in_chassis_fn
+
+    kf = logs.keyframes
+    valid = [k.valid_fraction for k in kf if math.isfinite(k.valid_fraction)]
+    tried = [k for k in kf if k.vo in ("accepted", "rejected", "gated")]
+    out = {
+        "stereo_valid_fraction": _r(float(np.mean(valid)), 4) if valid else None,
+        "vo_tried": len(tried),
+        "vo_acceptance": _r(sum(k.vo == "accepted" for k in tried) / len(tried), 4)
+        if tried else None,
+        "vo_error_per_m": None,
+    }
+    pose = logs.vectors["truth.pose"]
+    if not len(pose.times) or not any(k.vo == "accepted" for k in kf):
+        return out
+    X_BC = camera_in_chassis_fn(scenario.rover.description)
+
+    def X_WC(k):
+        return pose_matrix(_truth_pose_at(pose, k.t_capture_s)) @ X_BC(k.pan_rad, k.tilt_rad)
+
+    err = dist = 0.0
+    for prev, cur in itertools.pairwise(kf):
+        if cur.vo != "accepted":
+            continue
+        t_true = (np.linalg.inv(X_WC(prev)) @ X_WC(cur))[:3, 3]
+        t_vo = np.array([cur.vo_tx_m, cur.vo_ty_m, cur.vo_tz_m])
+        err += float(np.linalg.norm(t_vo - t_true))
+        dist += float(np.linalg.norm(t_true))
+    out["vo_error_per_m"] = _r(err / dist, 5) if dist > 0 else None
+    return out
+
+
+def hazard_detection(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict:
+    """How far ahead the ground's stereo found the hazards near the path. A hazard is a
+    cell of the ground's costmap grid holding a true hazard (a lethal cell of the true
+    terrain's costmap at the site's resolution, the same hazard rules) within
+    :data:`NEAR_PATH_M` of the rover's true track that the a-priori map did not mark
+    lethal (only stereo could find it). It is detected at the first keyframe whose
+    stereo made it, or a neighbouring cell (the ground's pose error), lethal; its range
+    is the distance from the rover's true position then to the cell's centre. Returns
+    ``hazards_near_path``, ``hazards_detected``, ``hazards_missed`` and
+    ``detection_range_m`` (median, p90), or {} without ground stereo."""
+    import dataclasses as dc
+
+    from lunar_drake import preflight
+    from lunar_drake.autonomy.costmap import RoverEnvelope, costmap_of_product
+    from lunar_drake.autonomy.map_product import make_map_product
+
+    cm, first, prior = logs.ground_costmap, logs.ground_first_lethal_s, logs.ground_prior_costmap
+    pose = logs.vectors["truth.pose"]
+    if cm is None or first is None or prior is None or len(pose.times) < 2:
+        return {}
+    track = pose.data[:, :2]
+    lo, hi = track.min(axis=0) - NEAR_PATH_M, track.max(axis=0) + NEAR_PATH_M
+    truth_cfg = dc.replace(scenario.ground.map, source="truth", margin_m=2.0)
+    product = make_map_product(heightfield=site.heightfield, points_xy=[tuple(lo), tuple(hi)],
+                               map_config=truth_cfg, seed=scenario.site.seed,
+                               rock_mask=preflight.rock_mask_reader(site))  # fmt: skip
+    true_cm = costmap_of_product(product, rover=RoverEnvelope.of(scenario.rover.description),
+                                 hazards=scenario.ground.hazards)  # fmt: skip
+    rows, cols = np.nonzero(true_cm.lethal_raw)
+    res = true_cm.resolution_m
+    x = true_cm.x0_m + (cols + 0.5) * res
+    y = true_cm.y1_m - (rows + 0.5) * res
+    r = np.floor((cm.y1_m - y) / cm.resolution_m).astype(int)
+    c = np.floor((x - cm.x0_m) / cm.resolution_m).astype(int)
+    inside = (r >= 0) & (r < cm.shape[0]) & (c >= 0) & (c < cm.shape[1])
+    hazard = np.zeros(cm.shape, bool)
+    hazard[r[inside], c[inside]] = True
+    hazard &= ~prior.lethal_raw
+    hr, hc = np.nonzero(hazard)
+    cx = cm.x0_m + (hc + 0.5) * cm.resolution_m
+    cy = cm.y1_m - (hr + 0.5) * cm.resolution_m
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(track).query(np.column_stack([cx, cy]))[0] <= NEAR_PATH_M
+    hr, hc, cx, cy = hr[near], hc[near], cx[near], cy[near]
+    padded = np.pad(first, 1, constant_values=np.nan)
+    ranges = []
+    for i in range(len(hr)):
+        window = padded[hr[i]:hr[i] + 3, hc[i]:hc[i] + 3]
+        if np.isnan(window).all():
+            continue
+        t = float(np.nanmin(window))
+        p = _truth_pose_at(pose, t)
+        ranges.append(math.hypot(p[0] - cx[i], p[1] - cy[i]))
+    det = {"median": _r(float(np.median(ranges)), 3),
+           "p90": _r(float(np.percentile(ranges, 90)), 3)} if ranges else None  # fmt: skip
+    return {
+        "hazards_near_path": len(hr),
+        "hazards_detected": len(ranges),
+        "hazards_missed": len(hr) - len(ranges),
+        "detection_range_m": det,
+    }
+
+
 def _ground_map(logs) -> dict:
     """The ground's a-priori map as summaries report it: ``map_source`` (orbital, or truth:
     the oracle) and the product's facts (:func:`lunar_drake.preflight.describe`)."""
@@ -344,6 +462,9 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "perception": _perception(logs.keyframes),
         "camera_frames": int(logs.frames_written),
     }
+    if logs.keyframes:
+        summary["perception"].update(vo_scores(scenario=scenario, logs=logs))
+        summary["perception"].update(hazard_detection(scenario=scenario, site=site, logs=logs))
     if scenario.sensors.nss.enabled or scenario.sensors.nirvss.enabled:
         summary["science"] = science(scenario=scenario, site=site, logs=logs)
     return summary

@@ -111,6 +111,8 @@ class SimulationLogs:
             a-priori one without ground perception), or None when it had no map.
         ground_prior_costmap: the ground's a-priori costmap on the grid of
             ``ground_costmap`` (the stereo hazards are where they differ), or None.
+        ground_first_lethal_s: per cell of ``ground_costmap``, the capture time (s) of
+            the keyframe whose stereo first made it lethal (NaN: never), or None.
         preflight: what the mission had before launch
             (:func:`lunar_drake.preflight.describe`: the ground's map and its source, the
             flight's slip calibration).
@@ -134,6 +136,7 @@ class SimulationLogs:
     keyframes: list = dc.field(default_factory=list)
     ground_costmap: object = None
     ground_prior_costmap: object = None
+    ground_first_lethal_s: object = None
     preflight: dict = dc.field(default_factory=dict)
 
 
@@ -337,10 +340,12 @@ def simulate(
         science = [(d.t_received_s, d.message.payload)
                    for d in rx.received(rx.GetMyContextFromRoot(root))]  # fmt: skip
     keyframes, costmap, prior = [], operator.prior_costmap, operator.prior_costmap
+    first_lethal = None
     if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.perception"):
         gp = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.perception")
         pst = gp.perception_state(root)
         keyframes, costmap = pst.records.items(), pst.costmap
+        first_lethal = pst.first_lethal_s
         prior = gp.costmap_output.Allocate().get_value()[1]  # the prior, refined
     return SimulationLogs(
         simulated_s=simulated,
@@ -358,6 +363,7 @@ def simulate(
         keyframes=keyframes,
         ground_costmap=costmap,
         ground_prior_costmap=prior,
+        ground_first_lethal_s=first_lethal,
         preflight=preflight.describe(scenario, map_product=map_product),
         wall={
             "build_s": t_built - t0,

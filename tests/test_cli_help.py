@@ -35,7 +35,7 @@ def test_help_texts_have_no_rest_markup_and_say_where_to_start():
     assert "lunar-drake run --scenario small" in top and "lunar-drake scenarios" in top
     names = dict(_subparsers(parser))
     expected = {"run", "scenarios", "plan", "render", "terrain", "terrain synth", "world",
-                "world build", "slip-study", "vo-study", "slip-fit", "ephemeris",
+                "world build", "trade", "slip-study", "vo-study", "slip-fit", "ephemeris",
                 "lightmap"}  # fmt: skip
     assert expected <= set(names)
     for name, p in names.items():

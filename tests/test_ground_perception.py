@@ -206,6 +206,10 @@ def test_a_boulder_seen_in_stereo_becomes_lethal_and_blocks_the_path(scene):
     rec = st.records.items()[-1]
     assert rec.vo == "accepted", rec.reason
     assert rec.new_lethal > 0 and st.version == 1
+    # when each cell first became lethal: this keyframe's capture time, nowhere else
+    seen = np.isfinite(st.first_lethal_s)
+    assert seen.sum() == rec.new_lethal and (st.first_lethal_s[seen] == f2.t_capture_s).all()
+    assert 0.0 < rec.valid_fraction <= 1.0 and np.isfinite(rec.vo_tx_m)
     lethal = np.argwhere(st.costmap.lethal_raw)
     x, y = st.costmap.centre_of(lethal[:, 0], lethal[:, 1])
     d = np.hypot(x - BOULDER[0], y - BOULDER[1])
@@ -329,6 +333,10 @@ def test_a_mission_with_ground_perception_writes_its_keyframes_and_map(cache, tm
     assert summary["goals"][0]["reached"], summary["goals"]
     gp = summary["perception"]
     assert gp["keyframes"] >= 5 and gp["vo"].get("accepted", 0) >= 3, gp
+    # scored on truth: VO's steps within a few percent of the true camera motion
+    assert 0.0 < gp["vo_error_per_m"] < 0.05 and 0.0 < gp["vo_acceptance"] <= 1.0, gp
+    assert 0.1 < gp["stereo_valid_fraction"] < 1.0, gp
+    assert gp["hazards_detected"] + gp["hazards_missed"] == gp["hazards_near_path"], gp
     outputs.write_run(tmp_path, scenario=scenario, logs=logs, summary=summary,
                       timing=logs.wall)  # fmt: skip
     rows = list(csv.DictReader(open(tmp_path / "keyframes.csv")))

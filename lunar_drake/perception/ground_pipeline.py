@@ -150,7 +150,10 @@ class KeyframeRecord:
     since the first keyframe (``sigma_m``, per axis), the lethal cells the map added
     (``new_lethal``) and the correction from then on (on-board pose -> ground pose, a
     planar map ``p' = Rz(yaw) p + (x, y)``: ``correction_x_m``, ``correction_y_m``,
-    ``correction_yaw_rad``)."""
+    ``correction_yaw_rad``); for scoring: the fraction of pixels with a valid disparity
+    (``valid_fraction``), VO's translation from the previous keyframe's camera frame to
+    this one's (``vo_tx_m``, ``vo_ty_m``, ``vo_tz_m``, in the previous camera frame;
+    NaN without VO) and the mast's pan and tilt in the frame's header (rad)."""
 
     t_capture_s: float
     frame_index: int
@@ -171,6 +174,12 @@ class KeyframeRecord:
     correction_x_m: float = 0.0
     correction_y_m: float = 0.0
     correction_yaw_rad: float = 0.0
+    valid_fraction: float = math.nan
+    vo_tx_m: float = math.nan
+    vo_ty_m: float = math.nan
+    vo_tz_m: float = math.nan
+    pan_rad: float = math.nan
+    tilt_rad: float = math.nan
 
 
 @dc.dataclass(frozen=True)
@@ -190,6 +199,9 @@ class PerceptionState:
     costmap: object = None
     version: int = 0
     records: Ledger = dc.field(default_factory=Ledger)
+    #: Per costmap cell, the capture time (s) of the keyframe whose stereo first made it
+    #: lethal (NaN: never); for scoring the hazard detection range.
+    first_lethal_s: np.ndarray | None = None
 
     def __deepcopy__(self, memo):
         return self
@@ -343,6 +355,7 @@ def perception_step(
         intensity = res.left_8bit[near].astype(np.float64) / 255.0
         vo, reason, fit, rmse, cond = "none", "", math.nan, math.nan, math.nan
         odom_step = vo_step = diff = math.nan
+        vo_t = (math.nan, math.nan, math.nan)
         var, sys_xy = s.key_var_m2, s.key_sys_xy
         if first:
             X_WC_ground = s.correction @ X_WC_onboard
@@ -360,6 +373,7 @@ def perception_step(
                            frustum=frustum)  # fmt: skip
                 fit, rmse, cond, reason = al.fitness, al.inlier_rmse_m, al.condition, al.reason
                 vo_step = float(np.linalg.norm(al.T_prev_curr[:3, 3]))
+                vo_t = tuple(float(v) for v in al.T_prev_curr[:3, 3])
                 diff = float(np.linalg.norm(al.T_prev_curr[:3, 3] - T_odom[:3, 3]))
                 gate = config.vo_gate_sigmas * math.hypot(sig_o, config.vo_sigma_m)
                 excess, slip = innovation(T_odom[:3, 3], al.T_prev_curr[:3, 3])
@@ -400,7 +414,14 @@ def perception_step(
         haz = stereo_hazards(emap, hazards=hazards, rover=rover, config=map_cfg)
         costmap = merge_into_costmap(s.costmap, stereo=haz, rover=rover, hazards=hazards)
         # Cells stereo made lethal (confirming steep orbital cells may clear others).
-        new_lethal = int(np.count_nonzero(costmap.lethal_raw & ~s.costmap.lethal_raw))
+        newly = costmap.lethal_raw & ~s.costmap.lethal_raw
+        new_lethal = int(np.count_nonzero(newly))
+        first_lethal = s.first_lethal_s
+        if first_lethal is None or first_lethal.shape != newly.shape:
+            first_lethal = np.full(newly.shape, np.nan)
+        if new_lethal and np.isnan(first_lethal[newly]).any():
+            first_lethal = first_lethal.copy()  # the state's array is shared: copy on write
+            first_lethal[newly & np.isnan(first_lethal)] = float(frame.t_capture_s)
         rec = KeyframeRecord(
             t_capture_s=float(frame.t_capture_s), frame_index=int(frame.frame_index),
             points=len(cloud), vo=vo, reason=reason, fitness=float(fit),
@@ -411,6 +432,8 @@ def perception_step(
             sigma_m=math.hypot(math.sqrt(var), math.hypot(*sys_xy)), new_lethal=new_lethal,
             **dict(zip(("correction_x_m", "correction_y_m", "correction_yaw_rad"),
                        planar_correction(correction), strict=True)),
+            valid_fraction=float(np.mean(res.valid)), vo_tx_m=vo_t[0], vo_ty_m=vo_t[1],
+            vo_tz_m=vo_t[2], pan_rad=float(pan_tilt[0]), tilt_rad=float(pan_tilt[1]),
         )  # fmt: skip
         s = dc.replace(
             s, key_cloud=cloud, key_intensity=intensity, key_X_WC_onboard=X_WC_onboard,
@@ -418,6 +441,7 @@ def perception_step(
             emap=emap,
             costmap=costmap,
             version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
+            first_lethal_s=first_lethal,
         )  # fmt: skip
     return s
 
