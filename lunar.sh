@@ -51,8 +51,8 @@ library libusb-1.0 that open3d needs; a few minutes), then runs COMMAND:
   ./lunar.sh test [PYTEST OPTIONS]  ruff, then the test suite
   ./lunar.sh scenarios              the shipped scenarios, one line each
   ./lunar.sh COMMAND [OPTIONS]      any lunar-drake command: run, scenarios, plan, render,
-                                    terrain synth, world build, slip-study, vo-study,
-                                    slip-fit, ephemeris, lightmap
+                                    terrain synth, world build, trade, slip-study,
+                                    vo-study, slip-fit, ephemeris, lightmap
   ./lunar.sh COMMAND --help         the options of one command
   ./lunar.sh help | -h | --help     this text (no set-up)
 EOF
