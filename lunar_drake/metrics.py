@@ -231,6 +231,32 @@ def hazards(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> dict
     return out
 
 
+def power(logs: SimulationLogs) -> dict | None:
+    """The power system over the run, from the logged ``truth.power`` (``power.csv``),
+    each sample held until the next (a left Riemann sum over the log):
+    ``energy_generated_Wh`` (the array), ``energy_used_Wh`` (the loads), ``min_soc`` and
+    ``final_soc``, ``shadow_s`` (time with no direct sunlight on the panel: visible
+    fraction 0 or incidence >= 90 deg) and ``Wh_per_m`` (energy used per metre driven,
+    None without a traverse). None when the run has no power system."""
+    log = logs.vectors.get("truth.power")
+    if log is None or not len(log.times):
+        return None
+    dt = np.diff(log.times)
+    incidence, fraction, array_W, load_W, soc = (log.column(c) for c in log.columns)
+    dark = (fraction <= 0.0) | (incidence >= 90.0)
+    generated = float(np.sum(array_W[:-1] * dt)) / 3600.0
+    used = float(np.sum(load_W[:-1] * dt)) / 3600.0
+    dist = traverse(logs)["distance_m"]
+    return {
+        "energy_generated_Wh": _r(generated),
+        "energy_used_Wh": _r(used),
+        "min_soc": _r(np.min(soc)),
+        "final_soc": _r(soc[-1]),
+        "shadow_s": _r(float(np.sum(dt[dark[:-1]])), 3),
+        "Wh_per_m": _r(used / dist) if dist > 1e-6 else None,
+    }
+
+
 def link_stats(logs: SimulationLogs) -> dict:
     """Per direction: messages and bytes offered, delivered, still in flight, dropped
     (and why), and the delivery latency of what was delivered (``latency_s``: ``min``,
@@ -448,6 +474,7 @@ def summarize(*, scenario: Scenario, site: SiteData, logs: SimulationLogs) -> di
         "site": site.info,
         "site_dir": str(site.site.directory or site.site.dem) if site.site else "",
         "rover": traverse(logs),
+        "power": power(logs),
         "parked": parked_drift(logs),
         "localization": localization(logs),
         "goals": goals(scenario=scenario, logs=logs),

@@ -2,7 +2,8 @@
 
 A run directory holds ``scenario.yaml`` (the resolved scenario: ``lunar-drake run
 --scenario RUN/scenario.yaml`` reproduces the run), ``summary.json`` (deterministic),
-``timing.json`` (wall-clock figures), the CSV logs in :data:`LOG_FILES`,
+``timing.json`` (wall-clock figures), the CSV logs in :data:`LOG_FILES` (``power.csv``:
+the solar array, loads and battery, with ``power.enabled``),
 ``telemetry.csv`` (what the ground received), ``link.csv`` (every message over the
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
@@ -32,12 +33,14 @@ from lunar_drake.scenario import Scenario
 from lunar_drake.scenario_files import dump_scenario
 from lunar_drake.simulation import SimulationLogs
 
-#: Logged port -> CSV file (columns: ``t_s`` then the port's columns).
+#: Logged port -> CSV file (columns: ``t_s`` then the port's columns; a port the run did
+#: not log -- ``truth.power`` with ``power.enabled`` false -- writes no file).
 LOG_FILES = {
     "truth.pose": "truth.csv",
     "truth.wheel_state": "wheels.csv",
     "truth.drive_energy": "energy.csv",
     "truth.imu_bias": "imu_bias.csv",
+    "truth.power": "power.csv",
     "rover.imu": "imu.csv",
     "rover.star_tracker": "star_tracker.csv",
     "rover.wheel_encoders": "encoders.csv",
@@ -222,6 +225,8 @@ def write_run(
     out = Path(out_dir)
     paths = write_run_summary(out, scenario=scenario, summary=summary, timing=timing)
     for port, name in LOG_FILES.items():
+        if port not in logs.vectors:
+            continue
         log = logs.vectors[port]
         rows = (
             [f"{t:.6f}", *(_fmt(v) for v in row)]

@@ -5,7 +5,8 @@ A scenario is a YAML mapping onto :class:`Scenario` (Drake's ``yaml_load_typed``
 sections follow the mission's seams (docs/design.md):
 
 * the plant -- ``site``, ``terrain``, ``soil``, ``rover`` (with its lights), ``sensors``
-  (IMU, star tracker, wheel encoders, cameras: rates, delays, noise) and ``lighting``;
+  (IMU, star tracker, wheel encoders, cameras: rates, delays, noise), ``lighting`` and
+  ``power`` (solar array, battery, loads);
 * ``flight`` (rover software), ``ground`` (operations software: the route it sends) and
   ``comms`` (the uplink and downlink);
 * ``logging``, ``terrain_view`` and Drake's own ``simulator_config``, ``plant_config``
@@ -39,6 +40,7 @@ from lunar_drake.dynamics.terramechanics import SoilParams
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.models.rover_description import RoverDescription, krex2_rp
 from lunar_drake.perception.ground_pipeline import PerceptionConfig
+from lunar_drake.power.config import PowerConfig
 from lunar_drake.render.camera import CameraConfig
 from lunar_drake.science.config import WorldConfig
 from lunar_drake.science.drill import DrillConfig, check_drill_request
@@ -433,6 +435,9 @@ class Scenario:
         simulation_duration: simulated time (s).
         science: the world model science instruments read (:mod:`lunar_drake.science`;
             built on demand for the site and the epoch, and cached).
+        power: the rover's solar array, battery and loads
+            (:class:`~lunar_drake.power.config.PowerConfig`; the panel's size and mount
+            are the rover description's).
     """
 
     name: str = ""
@@ -450,6 +455,7 @@ class Scenario:
     logging: LoggingConfig = dc.field(default_factory=LoggingConfig)
     terrain_view: TerrainViewConfig = dc.field(default_factory=TerrainViewConfig)
     science: WorldConfig = dc.field(default_factory=WorldConfig)
+    power: PowerConfig = dc.field(default_factory=PowerConfig)
     simulator_config: SimulatorConfig = dc.field(
         default_factory=lambda: SimulatorConfig(
             max_step_size=0.01, accuracy=1.0e-3, use_error_control=False, target_realtime_rate=0.0
@@ -522,6 +528,7 @@ def validate_scenario(s: Scenario) -> None:
         raise ConfigError("sensors.drill.enabled needs sensors.nirvss.enabled (NIRVSS reads "
                           "the drill's samples)")  # fmt: skip
     _section("science", s.science.validate)
+    _section("power", s.power.validate)
     li = s.lighting
     check_range(
         "lighting.ephemeris_update_s", li.ephemeris_update_s, 0.0, 86400.0, lo_open=True, unit=" s"

@@ -28,18 +28,21 @@ from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.body_pose_vector import BodyPoseVector
 from lunar_drake.systems.command_executor import STATUS_FIELDS
+from lunar_drake.systems.power_system import TRUTH_FIELDS as POWER_FIELDS
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
 
 _WHEELS = ("fl", "fr", "rl", "rr")
 _AXES6 = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps")
 _AXES6 += ("accel_x_mps2", "accel_y_mps2", "accel_z_mps2")
 
-#: Mission output ports logged every ``logging.period_s``, with their columns.
+#: Mission output ports logged every ``logging.period_s``, with their columns (those the
+#: mission has: ``truth.power`` only when ``power.enabled``).
 LOGGED_PORTS = {
     "truth.pose": BodyPoseVector.FIELDS,
     "truth.wheel_state": tuple(f"{w}_{f}" for w in _WHEELS for f in WHEEL_STATE_FIELDS),
     "truth.drive_energy": ("energy_J",),
     "truth.imu_bias": tuple(f"bias_{a}" for a in _AXES6),
+    "truth.power": POWER_FIELDS,
     "rover.imu": _AXES6,
     "rover.star_tracker": ("qw", "qx", "qy", "qz"),
     "rover.wheel_encoders": tuple(f"{w}_angle_rad" for w in _WHEELS),
@@ -91,7 +94,8 @@ class SimulationLogs:
         simulated_s: simulated time reached (s).
         stop_reason: "duration reached", or why the run stopped early.
         systems: names of the mission's subsystems, recursively (sorted).
-        vectors: port name -> :class:`VectorLog` (see :data:`LOGGED_PORTS`).
+        vectors: port name -> :class:`VectorLog` (see :data:`LOGGED_PORTS`; the ports
+            the mission has).
         telemetry: what the ground received (:class:`ReceivedTelemetry`).
         link: every message over the uplink and downlink
             (:class:`~lunar_drake.comms.link.LinkRecord`).
@@ -194,7 +198,9 @@ def simulate(
     builder.AddSystem(mission)
     period = scenario.logging.period_s
     loggers = {
-        name: LogVectorOutput(mission.GetOutputPort(name), builder, period) for name in LOGGED_PORTS
+        name: LogVectorOutput(mission.GetOutputPort(name), builder, period)
+        for name in LOGGED_PORTS
+        if mission.HasOutputPort(name)
     }
     writer = None
     cam = scenario.sensors.camera

@@ -28,6 +28,8 @@ KEPT_AT_DEFAULT = {
     "scenario and tests/test_goto.py drive to goals)",
     "flight.estimator.slip_calibration": "it makes slip_vs_slope, which OneOfEverything "
     "writes by hand (the default, skid and prospect scenarios calibrate)",
+    "power.enabled": "OneOfEverything simulates the power system with its other fields "
+    "(tests/test_power_system.py builds a plant with it off)",
 }
 
 
@@ -259,6 +261,8 @@ def test_missing_file_and_name():
         ("{flight: {gimbal: {lookahead_m: 0.1}}}", "flight.gimbal.lookahead_m = 0.1"),
         ("{ground: {route: [{duration_s: -1}]}}", r"ground.route\[0\].duration_s = -1"),
         ("{logging: {period_s: 0}}", "logging.period_s = 0"),
+        ("{power: {battery: {capacity_Wh: 0}}}", "power.battery.capacity_Wh = 0"),
+        ("{power: {period_s: 0}}", "power.period_s = 0 is out of range"),
         ("{rover: {lights: [{body: chassis, xyz: [1, 2]}]}}", r"rover.lights\[0\]: xyz"),
     ],
 )

@@ -271,6 +271,14 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
         f"max sinkage {100 * rv['max_sinkage_m']:.1f} cm, max tilt {rv['max_tilt_deg']:.1f} deg, "
         f"drive energy {rv['energy_J']:.0f} J"
     )
+    pw = summary.get("power")
+    if pw:
+        per_m = f", {pw['Wh_per_m']:.3f} Wh/m" if pw["Wh_per_m"] is not None else ""
+        print(
+            f"Power: array {pw['energy_generated_Wh']:.1f} Wh, loads {pw['energy_used_Wh']:.1f} Wh"
+            f"{per_m}; SOC {100 * pw['final_soc']:.1f}% at the end (min "
+            f"{100 * pw['min_soc']:.1f}%); {pw['shadow_s']:.0f} s without direct sun on the panel"
+        )
     loc = summary["localization"]
     if loc:
         print(
@@ -324,7 +332,7 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
               + score)  # fmt: skip
     from lunar_drake import outputs
 
-    files = outputs.run_files()
+    files = [name for name in outputs.run_files() if (out / name).exists()]
     for name in outputs.SCIENCE_FILES:
         if (out / name).exists():
             files.append(name)

@@ -6,12 +6,14 @@ ports are named ``<subsystem>.<signal>``:
 * inputs -- actuator commands: ``rover.wheel_speed_command`` (4, rad/s),
   ``rover.steer_angle_command`` (4, rad; explicit steer only), ``rover.gimbal_command``
   (2: pan, tilt, rad), ``rover.brake_command`` (1: >= 0.5 engages the wheel brakes);
-* sensor outputs -- :data:`SENSOR_PORTS`, ``rover.nss`` (2: epithermal and thermal
-  counts) when ``sensors.nss.enabled``, ``rover.nirvss`` (8: band depths and the LCS
-  temperature) when ``sensors.nirvss.enabled`` and, with cameras,
-  ``camera.{left,right}.{raw,preview}`` and ``camera.frame_index``;
-* truth outputs -- :data:`TRUTH_PORTS` and, with cameras,
-  ``truth.camera.{left,right}.{depth,label}``: ground truth for scoring and logging only.
+* sensor outputs -- :data:`SENSOR_PORTS` (``rover.power``, 3: SOC, array and load power
+  in W, when ``power.enabled``), ``rover.nss`` (2: epithermal and thermal counts) when
+  ``sensors.nss.enabled``, ``rover.nirvss`` (8: band depths and the LCS temperature) when
+  ``sensors.nirvss.enabled`` and, with cameras, ``camera.{left,right}.{raw,preview}`` and
+  ``camera.frame_index``;
+* truth outputs -- :data:`TRUTH_PORTS` (``truth.power`` when ``power.enabled``) and,
+  with cameras, ``truth.camera.{left,right}.{depth,label}``: ground truth for scoring and
+  logging only.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from lunar_drake.ephemeris.sun_earth import SiteLocation
 from lunar_drake.errors import ConfigError
 from lunar_drake.models.rover_sdf import RoverModel, add_rover
 from lunar_drake.models.spawn import spawn_pose
+from lunar_drake.power.solar_array import PanelMount
 from lunar_drake.scenario import Scenario
 from lunar_drake.site import SiteData
 from lunar_drake.systems.body_pose_vector import BodyPoseVector
@@ -44,6 +47,7 @@ from lunar_drake.systems.energy_meter import EnergyMeter
 from lunar_drake.systems.ephemeris_source import EphemerisSource
 from lunar_drake.systems.imu import Imu
 from lunar_drake.systems.meshcat_sun import MeshcatSun
+from lunar_drake.systems.power_system import PowerSystem
 from lunar_drake.systems.star_tracker import StarTracker
 from lunar_drake.systems.terrain_source import TerrainSource
 from lunar_drake.systems.terrain_visualizer import TerrainVisualizer
@@ -51,8 +55,9 @@ from lunar_drake.systems.wheel_brakes import WheelBrakes
 from lunar_drake.systems.wheel_encoders import WheelEncoders, wheel_angle_selector
 from lunar_drake.systems.wheel_regolith_contact import WheelRegolithContact
 
-#: Sensor outputs (what flight software may read).
-SENSOR_PORTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders")
+#: Sensor outputs (what flight software may read); ``rover.power`` (3: SOC, array and
+#: load power, W) when ``power.enabled``.
+SENSOR_PORTS = ("rover.imu", "rover.star_tracker", "rover.wheel_encoders", "rover.power")
 #: Science instrument outputs, when the rover carries them (sensors too).
 INSTRUMENT_PORTS = ("rover.nss", "rover.nirvss", "rover.drill")
 
@@ -66,6 +71,7 @@ TRUTH_PORTS = (
     "truth.sun_direction_W",
     "truth.sun_elevation_deg",
     "truth.heightfield",
+    "truth.power",
 )
 
 #: Actuator-command inputs, in the order of the servo set-point multiplexer.
@@ -149,6 +155,9 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     if scenario.sensors.drill.enabled:
         _add_drill(builder, scenario=scenario, plant=plant, rover=rover, site=site)
     _add_truth(builder, plant=plant, rover=rover, contact=contact)
+    if scenario.power.enabled:
+        _add_power(builder, scenario=scenario, plant=plant, rover=rover, terrain=terrain,
+                   ephem=ephem)  # fmt: skip
     if scenario.comms.line_of_sight.enabled:
         los_cfg = scenario.comms.line_of_sight
         los = builder.AddNamedSystem(
@@ -364,23 +373,52 @@ def _add_truth(builder, *, plant, rover: RoverModel, contact) -> None:
     builder.ExportOutput(truth.pose_output, "truth.pose")
     builder.ExportOutput(contact.wheel_state_output, "truth.wheel_state")
     builder.ExportOutput(contact.off_terrain_output, "truth.off_terrain")
+    nq = plant.num_positions()
+
+    def actuation(actuators):
+        return [plant.get_joint_actuator(a.index()).input_start() for a in actuators]
+
+    # Positive work of the drive motors (``truth.drive_energy``) and of the steering
+    # motors (``steer_energy``, for the power system), integrated at the plant's step.
     meter = builder.AddNamedSystem(
         "rover.energy_meter",
         EnergyMeter(
-            actuation_indices=[
-                plant.get_joint_actuator(a.index()).input_start() for a in rover.drive_actuators
-            ],
-            velocity_indices=[
-                plant.num_positions() + j.velocity_start() for j in rover.drive_joints
-            ],
+            actuation_indices=actuation(rover.drive_actuators),
+            velocity_indices=[nq + j.velocity_start() for j in rover.drive_joints],
             n_actuation=plant.num_actuators(),
             n_state=plant.num_multibody_states(),
             period_s=plant.time_step(),
+            groups=[("steer", actuation(rover.steer_actuators),
+                     [nq + j.velocity_start() for j in rover.steer_joints])],
         ),
-    )
+    )  # fmt: skip
     builder.Connect(plant.get_net_actuation_output_port(), meter.actuation_input)
     builder.Connect(plant.get_state_output_port(), meter.state_input)
     builder.ExportOutput(meter.energy_output, "truth.drive_energy")
+
+
+def _add_power(builder, *, scenario: Scenario, plant, rover: RoverModel, terrain, ephem) -> None:
+    """The solar array, battery and loads: ``rover.power`` (sensor: SOC, array and load
+    power) and ``truth.power`` (:data:`~lunar_drake.systems.power_system.TRUTH_FIELDS`).
+    The motors' work comes from the energy meter (drive and steering joints)."""
+    power = builder.AddNamedSystem(
+        "rover.power",
+        PowerSystem(
+            config=scenario.power,
+            mount=PanelMount.from_description(rover.description),
+            chassis_body_index=rover.chassis.index(),
+        ),
+    )
+    meter = builder.GetSubsystemByName("rover.energy_meter")
+    builder.Connect(plant.get_body_poses_output_port(), power.body_poses_input)
+    builder.Connect(ephem.GetOutputPort("sun_direction_W"), power.sun_direction_input)
+    builder.Connect(ephem.GetOutputPort("sun_distance_km"), power.sun_distance_input)
+    builder.Connect(terrain.heightfield_output, power.heightfield_input)
+    builder.Connect(meter.energy_output, power.drive_energy_input)
+    builder.Connect(meter.group_outputs["steer"], power.steer_energy_input)
+    builder.ConnectInput("rover.brake_command", power.brake_command_input)
+    builder.ExportOutput(power.measurement_output, "rover.power")
+    builder.ExportOutput(power.truth_output, "truth.power")
 
 
 def _add_cameras(builder, *, scenario, plant, scene_graph, rover, contact, site, ephem, location):

@@ -20,7 +20,13 @@ import numpy as np
 
 from lunar_drake.errors import check_range
 
-__all__ = ["LoadBreakdown", "LoadsConfig", "load_breakdown", "motor_electrical_W"]
+__all__ = [
+    "LoadBreakdown",
+    "LoadsConfig",
+    "load_breakdown",
+    "mean_load_breakdown",
+    "motor_electrical_W",
+]
 
 _CONSTANT_LOADS = ("avionics_W", "cameras_W", "radio_W", "instruments_W", "heaters_W")
 
@@ -103,3 +109,28 @@ def load_breakdown(
         holding_W=float(config.holding_W) if braked else 0.0,
         **{name: float(getattr(config, name)) for name in _CONSTANT_LOADS},
     )  # fmt: skip
+
+
+def mean_load_breakdown(
+    *,
+    config: LoadsConfig,
+    dt_s: float,
+    drive_work_J: float = 0.0,
+    steer_work_J: float = 0.0,
+    braked: bool = False,
+) -> LoadBreakdown:
+    """Every load's mean electrical power (W) over ``dt_s`` seconds in which the drive
+    and steering motors did ``drive_work_J`` and ``steer_work_J`` of positive mechanical
+    work (J: the integral of ``sum(max(tau omega, 0))``, as an energy meter integrates it
+    at the plant's step) and the rover was braked or not throughout. For constant torques
+    and rates this equals :func:`load_breakdown` (work = power x ``dt_s``)."""
+    check_range("dt_s", dt_s, 0.0, 1.0e7, lo_open=True, unit=" s")
+    for name, work in (("drive_work_J", drive_work_J), ("steer_work_J", steer_work_J)):
+        check_range(name, work, 0.0, 1.0e12, unit=" J")
+    dt = float(dt_s)
+    return LoadBreakdown(
+        drive_W=float(drive_work_J) / dt / float(config.drive_efficiency),
+        steer_W=float(steer_work_J) / dt / float(config.steer_efficiency),
+        holding_W=float(config.holding_W) if braked else 0.0,
+        **{name: float(getattr(config, name)) for name in _CONSTANT_LOADS},
+    )

@@ -172,7 +172,7 @@ class PanelMount:
 
 @dc.dataclass(frozen=True)
 class ArrayOutput:
-    """One evaluation of the array (the future ``power.csv`` columns among them).
+    """One evaluation of the array (``power.csv``'s array columns among them).
 
     Attributes:
         power_W: electrical power delivered by the array (W), >= 0.
