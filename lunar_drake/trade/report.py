@@ -55,17 +55,15 @@ def _groups(frame, study: Study, factor):
 
 
 def _plot(frame, study: Study, metric: str, path: Path) -> bool:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.figure import Figure
 
     y_all = frame[metric]
     if not np.issubdtype(y_all.dtype, np.number) or y_all.notna().sum() == 0:
         return False
     n = len(study.factors)
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n + 0.6, 3.2), squeeze=False, sharey=True)
+    fig = Figure(figsize=(3.6 * n + 0.6, 3.2))
+    axes = fig.subplots(1, n, squeeze=False, sharey=True)
     for ax, f in zip(axes[0], study.factors, strict=True):
         groups = _groups(frame, study, f)
         rng = np.random.default_rng(0)
@@ -88,7 +86,6 @@ def _plot(frame, study: Study, metric: str, path: Path) -> bool:
     fig.tight_layout()
     with atomic_path(path, what="plot") as tmp:
         fig.savefig(tmp, dpi=110, format="png", metadata={"Software": None})
-    plt.close(fig)
     return True
 
 
