@@ -329,6 +329,8 @@ class GroundConfig:
         ack_timeout_s: a goto (or resume) that telemetry has not acknowledged after this
             long is taken as lost and sent again, replanned (s).
         max_resends: at most this many times per goal (or resume).
+        resume_soc: after a ``low_soc`` safing the rover stays parked, charging, until
+            telemetry reports this state of charge; then the automatic resume.
         map: the a-priori map (:class:`~lunar_drake.autonomy.costmap.MapConfig`).
         hazards: how the map becomes a costmap
             (:class:`~lunar_drake.autonomy.costmap.HazardConfig`).
@@ -352,6 +354,7 @@ class GroundConfig:
     max_extrapolation_s: float = 10.0
     ack_timeout_s: float = 20.0
     max_resends: int = 5
+    resume_soc: float = 0.5
     map: MapConfig = dc.field(default_factory=MapConfig)
     hazards: HazardConfig = dc.field(default_factory=HazardConfig)
     perception: PerceptionConfig = dc.field(default_factory=PerceptionConfig)
@@ -604,6 +607,7 @@ def _validate_ground(g: GroundConfig) -> None:
     check_range("ground.max_extrapolation_s", g.max_extrapolation_s, 0.0, 3600.0, unit=" s")
     check_range("ground.ack_timeout_s", g.ack_timeout_s, 1.0, 3600.0, unit=" s")
     check_range("ground.max_resends", g.max_resends, 0, 1000)
+    check_range("ground.resume_soc", g.resume_soc, 0.0, 1.0)
     for k, a in enumerate(g.actions):
         key = f"ground.actions[{k}]"
         if a.action not in ACTIONS:

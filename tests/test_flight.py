@@ -152,12 +152,13 @@ def test_flight_diagram_reads_sensors_and_uplink_and_commands_the_wheels():
     s.flight.telemetry_rate_hz = 10.0
     flight = MakeFlightDiagram(scenario=s)
     names = {flight.get_input_port(k).get_name() for k in range(flight.num_input_ports())}
-    assert names == set(FLIGHT_INPUTS)
+    assert names == {*FLIGHT_INPUTS, "rover.power"}
     sim = Simulator(flight)
     ctx = sim.get_mutable_context()
     flight.GetInputPort("rover.imu").FixValue(ctx, np.zeros(6))
     flight.GetInputPort("rover.star_tracker").FixValue(ctx, [1.0, 0.0, 0.0, 0.0])
     flight.GetInputPort("rover.wheel_encoders").FixValue(ctx, np.zeros(4))
+    flight.GetInputPort("rover.power").FixValue(ctx, [0.8, 120.0, 90.0])
     cmd = DriveCommand(1.0, vx_mps=0.25)
     flight.GetInputPort("uplink.commands").FixValue(ctx, _deliveries([cmd]))
     sim.AdvanceTo(0.5)
@@ -166,5 +167,6 @@ def test_flight_diagram_reads_sensors_and_uplink_and_commands_the_wheels():
     assert flight.GetOutputPort("rover.brake_command").Eval(ctx)[0] == 0.0
     (msg,) = flight.GetOutputPort("downlink.telemetry").Eval(ctx)
     assert msg.topic == "telemetry" and msg.payload[6] == 0.25  # vx_cmd_mps
+    assert tuple(msg.payload[-2:]) == (0.8, 120.0)  # soc, array_W
     sim.AdvanceTo(2.0)
     assert flight.GetOutputPort("rover.brake_command").Eval(ctx)[0] == 1.0

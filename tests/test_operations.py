@@ -157,6 +157,35 @@ def test_bumper_trips_on_each_condition_after_its_persistence_only_while_driving
         assert r == ""
 
 
+def test_low_state_of_charge_trips_while_driving_only_and_not_without_a_sensor():
+    cfg = SafetyConfig(min_soc=0.2)
+    assert _bumper(3, config=cfg, soc=0.19) == ["low_soc"] * 3  # at once
+    assert _bumper(3, config=cfg, soc=0.21) == [""] * 3
+    assert _bumper(3, config=cfg, soc=math.nan) == [""] * 3  # no power sensor
+    assert _bumper(3, config=cfg, soc=0.1, driving=False) == [""] * 3
+    assert _bumper(3, config=SafetyConfig(min_soc=0.0), soc=0.01) == [""] * 3  # off
+    # A condition with its persistence met comes first.
+    assert _bumper(6, config=cfg, soc=0.1, pitch_rad=1.0)[-1] == "tilt"
+
+
+def test_a_low_soc_safing_waits_for_the_charge_before_its_resume():
+    from lunar_drake.autonomy.commands import SAFE_REASONS
+
+    g = Ground(params=OperatorParams(resume_soc=0.5, heartbeat_s=5.0))
+    g.tick(0.0, Request("goal", (10.0, 0.0)))
+    low = SAFE_REASONS.index("low_soc")
+    for t, soc in ((5.0, 0.19), (60.0, 0.35), (120.0, 0.49)):
+        g.telemetry(t, xy=(2, 0), mode="safed", motion_seq=g.goto_seq(), changes=2,
+                    reason=low, power=(soc, 150.0, 60.0))  # fmt: skip
+        assert g.tick(t + 0.1) == [], t  # parked, charging
+    g.telemetry(180.0, xy=(2, 0), mode="safed", motion_seq=g.goto_seq(), changes=2,
+                reason=low, power=(0.51, 150.0, 60.0))  # fmt: skip
+    out = g.tick(180.1)
+    assert isinstance(out[0], ResumeCommand) and out[1].waypoints[0] == (2.0, 0.0)
+    kinds = [e.kind for e in g.state.events.items()]
+    assert kinds.count("charging") == 1 and kinds.count("resume") == 1
+
+
 def test_safety_config_errors_name_the_field():
     from lunar_drake.errors import OutOfRangeError
 
@@ -221,13 +250,13 @@ class Ground:
         return [tuple(start), tuple(goal)]
 
     def telemetry(self, t, *, xy, mode, command_seq=None, motion_seq=-1, changes=0,
-                  reason=0, twist=(0, 0, 0), brake=1):  # fmt: skip
+                  reason=0, twist=(0, 0, 0), brake=1, power=None):  # fmt: skip
         from lunar_drake.autonomy.commands import MODES
 
         cs = max(motion_seq, 0) if command_seq is None else command_seq
         status = [MODES.index(mode), cs, reason, changes, motion_seq]
         packet = pack_telemetry(pose_estimate=[xy[0], xy[1], 0, 0, 0, 0], twist_command=twist,
-                                brake=brake, status=status)  # fmt: skip
+                                brake=brake, status=status, power=power)  # fmt: skip
         self.inbox += (Delivery(Message("telemetry", self.tel_seq, t, packet, 0), t),)
         self.tel_seq += 1
 
@@ -524,6 +553,22 @@ def test_the_virtual_bumper_safes_a_stalled_or_tilted_rover(cache, text, reason)
     assert status.column("mode")[-1] == 3  # safed at the end
     assert logs.vectors["flight.brake_command"].data[-1, 0] == 1.0
     assert summary["hazards"]["strikes"] == 0
+
+
+def test_a_flat_battery_safes_the_rover_and_the_ground_waits_for_the_charge(cache):
+    """A battery at its floor (a tiny pack and a near-dead array): the first drive trips
+    low_soc at once; the ground parks the rover to charge instead of resuming it, and
+    telemetry carries the state of charge down."""
+    text = ("{simulation_duration: 30, power: {battery: {capacity_Wh: 0.5, initial_soc: 0.2005},"
+            " array: {cell_efficiency: 0.001}}}")  # fmt: skip
+    logs, summary = _goto_mission(text)
+    assert summary["modes"]["safings"] == {"low_soc": 1}
+    assert summary["ground"]["resumes"] == 0 and summary["ground"]["safings_seen"] == 1
+    kinds = [e.kind for e in logs.ground_events]
+    assert "charging" in kinds and "resume" not in kinds
+    assert logs.vectors["flight.status"].column("mode")[-1] == 3  # still safed
+    soc = logs.telemetry.packets[:, logs.telemetry.columns.index("soc")]
+    assert 0.0 <= soc.min() < 0.2 and soc[0] == pytest.approx(0.2005, abs=1e-3)
 
 
 def test_the_operator_api_drives_the_mission_between_advances(cache):

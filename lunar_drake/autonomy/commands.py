@@ -32,7 +32,7 @@ from lunar_drake.comms.messages import Ledger
 #: Executor modes reported in telemetry (index = telemetry ``mode``).
 MODES = ("idle", "driving", "waiting", "safed")
 #: Why the rover safed itself (index = telemetry ``safe_reason``; "" = not safed).
-SAFE_REASONS = ("", "tilt", "stall", "slip", "uplink_loss")
+SAFE_REASONS = ("", "tilt", "stall", "slip", "uplink_loss", "low_soc")
 
 
 @dc.dataclass(frozen=True)

@@ -92,7 +92,7 @@ class OperatorParams:
     Attributes: drive_speed_mps, goto_tolerance_m (on board), goal_tolerance_m (the
     ground's judgement on the downlinked estimate), heartbeat_s, auto_resume,
     max_resumes, max_replans, replan_deviation_m, max_extrapolation_s, ack_timeout_s,
-    max_resends: see
+    max_resends, resume_soc: see
     :class:`~lunar_drake.scenario.GroundConfig`.
     """
 
@@ -107,6 +107,7 @@ class OperatorParams:
     max_extrapolation_s: float = 10.0
     ack_timeout_s: float = 20.0
     max_resends: int = 5
+    resume_soc: float = 0.5
 
 
 @dc.dataclass(frozen=True)
@@ -124,7 +125,8 @@ class OperatorState:
         resume_seq, resume_sent_s: the newest resume sent (-1 none) and when;
             resume_resends: how often it was sent again.
         resumes: automatic resumes so far. safe_seen: the telemetry ``mode_changes``
-            of the newest safing handled.
+            of the newest safing handled. charging: a ``low_soc`` safing waits for
+            ``resume_soc`` before its resume.
         tel_seq, packet, t_sent, t_received: the newest telemetry handled (-1 / None).
         last_sent_s: when a command last went up (s). outbox: this tick's messages.
         events: a Ledger of :class:`Event`. map_seen: the map version whose hazards the
@@ -149,6 +151,7 @@ class OperatorState:
     resume_resends: int = 0
     resumes: int = 0
     safe_seen: int = -1
+    charging: bool = False
     tel_seq: int = -1
     packet: np.ndarray | None = None
     t_sent: float = math.nan
@@ -291,6 +294,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
     goto_seq, path, replans, resumes = s.goto_seq, s.path, s.replans, s.resumes
     goto_sent, resends = s.goto_sent_s, s.resends
     resume_seq, resume_sent, resume_resends = s.resume_seq, s.resume_sent_s, s.resume_resends
+    charging = s.charging
     seq = s.next_seq
     out = []
 
@@ -373,7 +377,11 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             reason = SAFE_REASONS[int(packet[_F["safe_reason"]])]
             note("safed", reason)
             s_seen = changes
-            if params.auto_resume and resumes < params.max_resumes and not paused:
+            if reason == "low_soc":
+                charging = True
+                note("charging", f"parked until the state of charge reaches "
+                                 f"{params.resume_soc:.2f}")  # fmt: skip
+            elif params.auto_resume and resumes < params.max_resumes and not paused:
                 send(ResumeCommand())
                 resumes += 1
                 goto_seq = -1
@@ -382,6 +390,17 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             s_seen = s.safe_seen
     else:
         s_seen = s.safe_seen
+    if packet is not None and mode != "safed":
+        charging = False
+    # Charged after a low_soc safing: resume (and replan below).
+    soc = float(packet[_F["soc"]]) if packet is not None else math.nan
+    if charging and mode == "safed" and soc >= params.resume_soc:
+        charging = False
+        if params.auto_resume and resumes < params.max_resumes and not paused:
+            send(ResumeCommand())
+            resumes += 1
+            goto_seq = -1
+            note("resume", f"charged to {soc:.2f} ({resumes} of {params.max_resumes})")
     # A resume the rover has not acknowledged (still safed, older command seq): again.
     if (
         packet is not None
@@ -507,6 +526,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         resume_resends=resume_resends,
         resumes=resumes,
         safe_seen=s_seen,
+        charging=charging,
         tel_seq=tel_seq,
         packet=packet,
         t_sent=t_sent,

@@ -18,7 +18,9 @@ While a command drives the wheels, :func:`bumper_step` watches, each bumper tick
 
 The loss of the uplink for longer than ``uplink_timeout_s`` while driving is checked by
 the executor (:func:`~lunar_drake.autonomy.commands.executor_step`), which owns the
-uplink. A trip safes the rover until the ground sends a resume.
+uplink. **low_soc** -- the battery's state of charge (the power sensor) below
+``min_soc`` while driving -- trips at once. A trip safes the rover until the ground
+sends a resume.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads real field types.
@@ -52,6 +54,8 @@ class SafetyConfig:
         slip_persist_s: how long beyond it (s).
         uplink_timeout_s: safe when no uplink message (heartbeats included) has arrived
             for this long while a command runs (s); 0: never.
+        min_soc: safe when the battery's state of charge falls below this while
+            driving (fraction, [0, 1); 0: never).
     """
 
     enabled: bool = True
@@ -64,6 +68,7 @@ class SafetyConfig:
     yaw_slip_fraction: float = 0.8
     slip_persist_s: float = 3.0
     uplink_timeout_s: float = 60.0
+    min_soc: float = 0.2
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -78,6 +83,7 @@ class SafetyConfig:
         check_range("yaw_slip_fraction", self.yaw_slip_fraction, 0.0, 10.0)
         check_range("slip_persist_s", self.slip_persist_s, 0.0, 3600.0, unit=" s")
         check_range("uplink_timeout_s", self.uplink_timeout_s, 0.0, 1.0e6, unit=" s")
+        check_range("min_soc", self.min_soc, 0.0, 1.0, hi_open=True)
 
     def tilt_limit_rad(self, description) -> float:
         """The tilt limit (rad) for this rover."""
@@ -87,13 +93,14 @@ class SafetyConfig:
 
 def bumper_step(timers, *, dt_s: float, driving: bool, roll_rad: float, pitch_rad: float,
                 wheel_rate_cmd, wheel_rate_meas, yaw_rate_encoders: float,
-                yaw_rate_gyro: float, tilt_limit_rad: float,
-                config: SafetyConfig) -> tuple[np.ndarray, str]:  # fmt: skip
+                yaw_rate_gyro: float, tilt_limit_rad: float, config: SafetyConfig,
+                soc: float = math.nan) -> tuple[np.ndarray, str]:  # fmt: skip
     """One bumper tick. ``timers`` (3,) are how long each condition of :data:`TIMERS`
     has held (s); ``driving``: a command is driving the wheels. Wheel rates (rad/s) are
     commanded and measured (encoder differences); yaw rates (rad/s) from the encoders
-    (kinematics) and the gyro. Returns the new timers and the tripped condition ("" if
-    none; the first of TIMERS over its persistence time)."""
+    (kinematics) and the gyro; ``soc`` the battery's state of charge (NaN: no power
+    sensor). Returns the new timers and the tripped condition ("" if none; the first
+    of TIMERS over its persistence time, else ``low_soc``)."""
     t = np.zeros(3) if not driving else np.asarray(timers, np.float64).copy()
     if not driving:
         return t, ""
@@ -112,6 +119,8 @@ def bumper_step(timers, *, dt_s: float, driving: bool, roll_rad: float, pitch_ra
     for k, name in enumerate(TIMERS):
         if t[k] > 0.0 and t[k] >= persist[k] - 1e-9:
             return t, name
+    if config.min_soc > 0.0 and soc < config.min_soc:  # NaN (no sensor) compares False
+        return t, "low_soc"
     return t, ""
 
 

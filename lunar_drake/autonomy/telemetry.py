@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: Fields of a telemetry packet, in order (units in the names; mode is an index into
@@ -9,7 +11,8 @@ import numpy as np
 #: handled, -1 for none; safe_reason an index into
 #: :data:`~lunar_drake.autonomy.commands.SAFE_REASONS`; mode_changes counts every mode
 #: transition on board since the start, so the ground sees one it missed between packets;
-#: motion_seq is the seq of the newest drive or goto command accepted, -1 for none).
+#: motion_seq is the seq of the newest drive or goto command accepted, -1 for none;
+#: soc and array_W from the power sensor, NaN without one).
 TELEMETRY_FIELDS = (
     "x_m",
     "y_m",
@@ -26,18 +29,23 @@ TELEMETRY_FIELDS = (
     "safe_reason",
     "mode_changes",
     "motion_seq",
+    "soc",
+    "array_W",
 )
 
 
-def pack_telemetry(*, pose_estimate, twist_command, brake, status) -> np.ndarray:
+def pack_telemetry(*, pose_estimate, twist_command, brake, status, power=None) -> np.ndarray:
     """A telemetry packet (see :data:`TELEMETRY_FIELDS`); ``status`` is the executor's
-    (mode, command_seq, safe_reason, mode_changes, motion_seq)."""
+    (mode, command_seq, safe_reason, mode_changes, motion_seq); ``power`` the power
+    sensor's (soc, array W, load W) or None."""
+    p = (math.nan, math.nan) if power is None else (float(power[0]), float(power[1]))
     return np.concatenate(
         [
             np.asarray(pose_estimate, np.float64)[:6],
             np.asarray(twist_command, np.float64)[:3],
             [float(brake)],
             np.asarray(status, np.float64)[:5],
+            p,
         ]
     )
 

@@ -77,6 +77,7 @@ def flight_inputs(scenario: Scenario) -> tuple:
         FLIGHT_INPUTS
         + (IMAGE_INPUTS if sends_images(scenario) else ())
         + tuple(f"rover.{i.name}" for i in instruments(scenario))
+        + (("rover.power",) if scenario.power.enabled else ())
     )
 
 
@@ -127,7 +128,9 @@ def MakeFlightDiagram(*, scenario: Scenario):
             follower=follower_params(d),
         ),
     )
-    bumper = builder.AddNamedSystem("flight.bumper", VirtualBumper(description=d, config=f.safety))
+    power = scenario.power.enabled
+    bumper = builder.AddNamedSystem("flight.bumper", VirtualBumper(description=d, config=f.safety,
+                                                                   power=power))  # fmt: skip
     kinematics = builder.AddNamedSystem(
         "flight.kinematics", RoverKinematics(description=d, rate_hz=f.rate_hz)
     )
@@ -144,7 +147,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
         "flight.gimbal_pointing", GimbalPointing(description=d, config=f.gimbal)
     )
     telemetry = builder.AddNamedSystem(
-        "flight.telemetry", TelemetryPacketizer(rate_hz=f.telemetry_rate_hz)
+        "flight.telemetry", TelemetryPacketizer(rate_hz=f.telemetry_rate_hz, power=power)
     )
     builder.ExportInput(executor.commands_input, "uplink.commands")
     builder.Connect(executor.twist_output, kinematics.twist_input)
@@ -169,6 +172,9 @@ def MakeFlightDiagram(*, scenario: Scenario):
     builder.Connect(executor.status_output, telemetry.status_input)
     builder.ExportInput(odometry.imu_input, "rover.imu")
     builder.ConnectInput("rover.imu", bumper.imu_input)
+    if power:  # the power sensor: low-SOC safing and SOC in telemetry
+        builder.ExportInput(bumper.power_input, "rover.power")
+        builder.ConnectInput("rover.power", telemetry.power_input)
     builder.ExportOutput(kinematics.wheel_speed_output, "rover.wheel_speed_command")
     builder.ExportOutput(gimbal.gimbal_command_output, "rover.gimbal_command")
     builder.ExportOutput(executor.brake_output, "rover.brake_command")

@@ -29,16 +29,18 @@ class TelemetryPacketizer(LeafSystem):
     ``telemetry`` is an outbox (a tuple holding the message made at the latest update;
     topic ``telemetry``, seq = update count, payload a float64 vector of
     :data:`~lunar_drake.autonomy.telemetry.TELEMETRY_FIELDS`). Inputs are flight
-    signals only (estimate, commands, executor status).
+    signals only (estimate, commands, executor status; with ``power``, the power
+    sensor's state of charge and array power).
     """
 
-    def __init__(self, *, rate_hz: float):
+    def __init__(self, *, rate_hz: float, power: bool = False):
         super().__init__()
         self._rate = float(rate_hz)
         self.pose_estimate_input = self.DeclareVectorInputPort("pose_estimate", 6)
         self.twist_input = self.DeclareVectorInputPort("twist_command", 3)
         self.brake_input = self.DeclareVectorInputPort("brake_command", 1)
         self.status_input = self.DeclareVectorInputPort("status", 5)
+        self.power_input = self.DeclareVectorInputPort("power", 3) if power else None
         self._outbox = self.DeclareAbstractState(AbstractValue.Make(()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / self._rate, 0.0, self._update)
         self.telemetry_output = self.DeclareStateOutputPort("telemetry", self._outbox)
@@ -50,6 +52,7 @@ class TelemetryPacketizer(LeafSystem):
             twist_command=self.twist_input.Eval(context),
             brake=self.brake_input.Eval(context)[0],
             status=self.status_input.Eval(context),
+            power=self.power_input.Eval(context) if self.power_input else None,
         )
         payload.setflags(write=False)
         msg = Message(

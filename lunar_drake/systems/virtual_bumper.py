@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
@@ -29,23 +31,26 @@ class VirtualBumper(LeafSystem):
         - wheel_speed_command
         - steer_angle_command (explicit steer only)
         - status
+        - power (with ``power=True``)
         output_ports:
         - trip
 
     Inputs are flight signals only: the on-board estimate (6,), the IMU (6,: gyro then
     accelerometer), the encoder angles (4,), the flight software's own wheel-rate and
-    steering commands (4,) and the executor's ``status`` (its first entry the mode
-    index into :data:`~lunar_drake.autonomy.commands.MODES`). Every 1 / ``rate_hz`` s it
+    steering commands (4,), the executor's ``status`` (its first entry the mode
+    index into :data:`~lunar_drake.autonomy.commands.MODES`) and, with ``power``, the
+    power sensor (3,: state of charge, array W, load W). Every 1 / ``rate_hz`` s it
     runs :func:`~lunar_drake.autonomy.safety.bumper_step` while the mode is
     ``driving``. ``trip`` (1,) is the index into
     :data:`~lunar_drake.autonomy.commands.SAFE_REASONS` of the condition that tripped
     at the latest tick (0: none); the executor latches it. State: discrete.
 
     Args:
-        description: the RoverDescription. config: :class:`SafetyConfig`.
+        description: the RoverDescription. config: :class:`SafetyConfig`. power: declare
+            the ``power`` input (the rover has a power system).
     """
 
-    def __init__(self, *, description, config: SafetyConfig):
+    def __init__(self, *, description, config: SafetyConfig, power: bool = False):
         super().__init__()
         config.validate()
         self._config = config
@@ -61,6 +66,7 @@ class VirtualBumper(LeafSystem):
         if not self._skid:
             self.steer_input = self.DeclareVectorInputPort("steer_angle_command", N_WHEELS)
         self.status_input = self.DeclareVectorInputPort("status", 5)
+        self.power_input = self.DeclareVectorInputPort("power", 3) if power else None
         self._state = self.DeclareDiscreteState(np.zeros(9))
         self.DeclarePeriodicDiscreteUpdateEvent(self._dt, 0.0, self._update)
         self.trip_output = self.DeclareVectorOutputPort(
@@ -88,6 +94,7 @@ class VirtualBumper(LeafSystem):
             wheel_rate_meas=delta / self._dt, yaw_rate_encoders=yaw_enc / self._dt,
             yaw_rate_gyro=float(self.imu_input.Eval(context)[2]), tilt_limit_rad=self._tilt,
             config=self._config,
+            soc=float(self.power_input.Eval(context)[0]) if self.power_input else math.nan,
         )  # fmt: skip
         s[_ANG], s[_TIM], s[_TRIP] = angles, timers, float(SAFE_REASONS.index(reason))
         discrete_state.get_mutable_vector(self._state).SetFromVector(s)
