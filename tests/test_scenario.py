@@ -28,6 +28,8 @@ KEPT_AT_DEFAULT = {
     "scenario and tests/test_goto.py drive to goals)",
     "flight.estimator.slip_calibration": "it makes slip_vs_slope, which OneOfEverything "
     "writes by hand (the default, skid and prospect scenarios calibrate)",
+    "flight.heading.policy": "its rover is skid-steer, which allows only the default "
+    "'path' (tests/test_heading.py drives 'sun')",
 }
 
 
