@@ -18,12 +18,19 @@ waypoint.
 (explicit steer only) decouples the two: the chassis velocity points at the aim point
 (a holonomic, crab command: body ``vx, vy`` from the world-frame direction, at
 ``speed_mps``), and the body yaw is steered towards the heading that turns the solar
-panel's normal to the Sun's azimuth, ``yaw_des = sun_azimuth - panel_azimuth_rad``
-(:func:`sun_heading`), at ``yaw_gain_per_s`` times the heading error, at most
-``max_wz_radps``; beyond ``turn_in_place_rad`` of heading error it turns in place first.
-The Sun's azimuth (rad, counter-clockwise from the estimate frame's +x) comes with each
-goto command (:class:`~lunar_drake.autonomy.commands.GotoCommand`; the ground computes
-it from the ephemeris); a goto without one is followed with ``path``.
+panel's normal to the Sun's azimuth, ``yaw_des = sun_azimuth - panel_azimuth_rad``, or
+the feasible heading nearest it (:func:`sun_heading`), at ``yaw_gain_per_s`` times the
+heading error, at most ``max_wz_radps``; beyond ``turn_in_place_rad`` of heading error it
+turns in place first. Feasible: the crab angle (the leg's direction in the body frame)
+within ``max_crab_rad`` of the body's +x or -x axis. The steering limit bounds it, and
+so does the wheels' wrap: a wheel steers within +-90 deg, reversing its speed beyond, so
+a crab angle that wanders across +-90 deg (a leg towards or away from the Sun, with the
+panel on the side) flips every wheel by 180 deg at each crossing -- measured on the
+``goto`` site with the crab at 89.5 deg: the flipping wheels lost 2.4 m of the 15 m and
+fooled the estimate -- so ``max_crab_rad`` stays ``crab_margin_deg`` (10 deg) short of
+90 deg. The Sun's azimuth (rad, counter-clockwise from the estimate frame's +x) comes
+with each goto command (:class:`~lunar_drake.autonomy.commands.GotoCommand`; the ground
+computes it from the ephemeris); a goto without one is followed with ``path``.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads HeadingConfig's real
@@ -51,10 +58,14 @@ class HeadingConfig:
             azimuth (sent by the ground with each goto; module docstring).
         yaw_gain_per_s: ``sun``: commanded yaw rate per radian of heading error (1/s),
             capped at the follower's ``max_wz_radps``.
+        crab_margin_deg: ``sun``: the crab angle is kept at least this far from
+            +-90 deg, where the wheels' steering wraps (module docstring); the panel
+            then loses at most ``1 - cos(margin)`` of its sunlight (1.5 % at 10 deg).
     """
 
     policy: str = "path"
     yaw_gain_per_s: float = 1.0
+    crab_margin_deg: float = 10.0
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
@@ -64,6 +75,7 @@ class HeadingConfig:
             )
         check_range("yaw_gain_per_s", self.yaw_gain_per_s, 0.0, 100.0, lo_open=True,
                     unit=" 1/s")  # fmt: skip
+        check_range("crab_margin_deg", self.crab_margin_deg, 0.0, 45.0, unit=" deg")
 
 
 @dc.dataclass(frozen=True)
@@ -74,8 +86,8 @@ class FollowerParams:
     (:class:`HeadingConfig`). ``panel_azimuth_rad``: the solar panel normal's azimuth in
     the chassis frame (``rover.description.solar_panel_azimuth_rad``). ``max_crab_rad``:
     the largest crab angle (direction of travel off the body's +x, or off -x driving
-    backwards) the wheels can steer; pi/2 or more is any (the steering wraps at +-pi/2
-    by reversing the wheel).
+    backwards) the ``sun`` policy drives: the steering limit, less a margin from pi/2
+    (the wheels' wrap; module docstring); pi/2 or more allows any.
     """
 
     lookahead_m: float = 1.5
@@ -87,7 +99,7 @@ class FollowerParams:
     heading: str = "path"
     yaw_gain_per_s: float = 1.0
     panel_azimuth_rad: float = 0.0
-    max_crab_rad: float = 0.5 * math.pi
+    max_crab_rad: float = math.radians(80.0)
 
 
 def _wrap(a: float) -> float:
@@ -123,30 +135,31 @@ def aim_point(xy, waypoints, index: int, lookahead_m: float) -> tuple[np.ndarray
     return wp[-1].copy(), max(index, n - 2 if n >= 2 else 0)
 
 
-def sun_heading(course_rad: float, yaw_des_rad: float, max_crab_rad: float) -> float:
-    """The body yaw (rad, in [-pi, pi)) the ``sun`` policy holds while travelling along
-    ``course_rad`` (the world-frame direction of travel) when the panel wants
-    ``yaw_des_rad``.
+def sun_heading(leg_rad: float, yaw_des_rad: float, max_crab_rad: float) -> float:
+    """The body yaw (rad, in [-pi, pi)) the ``sun`` policy holds on a leg heading
+    ``leg_rad`` (world frame) when the panel wants ``yaw_des_rad``.
 
-    The crab angle it needs is ``beta = course - yaw_des``. The wheels can drive it when
-    ``|beta| <= max_crab_rad`` (forwards) or ``|beta| >= pi - max_crab_rad`` (backwards);
-    with ``max_crab_rad >= pi/2`` every crab angle is feasible and the yaw is
-    ``yaw_des``. Otherwise the rover drives at the feasible crab angle nearest ``beta``
-    (the largest one on that side, forwards or backwards): the yaw nearest ``yaw_des``,
-    which gives the panel the most sunlight it can have while driving that leg -- the
-    panel has one active face, so the flipped heading ``yaw_des + pi`` would be the worst
-    choice, never a compromise.
+    The crab angle ``yaw_des`` needs is ``beta = leg - yaw_des``; the wheels drive it when
+    ``|beta| <= max_crab_rad`` (forwards) or ``|beta| >= pi - max_crab_rad`` (backwards),
+    and then the yaw is ``yaw_des`` (``max_crab_rad >= pi/2``: always). Otherwise the
+    rover drives that leg at the feasible crab angle nearest ``beta`` -- the largest one
+    on that side, forwards or backwards -- i.e. at the feasible yaw nearest ``yaw_des``,
+    which leaves the panel the most sunlight it can have on that leg (its normal
+    ``|beta| - max_crab_rad`` or ``pi - max_crab_rad - |beta|`` off the Sun's azimuth).
+    The panel has one active face, so the turned-round heading ``yaw_des + pi`` is the
+    worst choice, never a compromise. The leg's heading, not the pure-pursuit aim,
+    decides, so the choice does not flicker with the aim.
     """
     yaw_des = _wrap(yaw_des_rad)
     lim = float(max_crab_rad)
     if lim >= 0.5 * math.pi:
         return yaw_des
-    beta = _wrap(course_rad - yaw_des)
+    beta = _wrap(leg_rad - yaw_des)
     if abs(beta) <= lim or abs(beta) >= math.pi - lim:
         return yaw_des
     feasible = (lim, -lim, math.pi - lim, lim - math.pi)
     best = min(feasible, key=lambda b: abs(_wrap(b - beta)))
-    return _wrap(course_rad - best)
+    return _wrap(leg_rad - best)
 
 
 def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: float,
@@ -168,8 +181,11 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     dx, dy = aim[0] - x, aim[1] - y
     d = max(math.hypot(dx, dy), 1e-6)
     if params.heading == "sun" and sun_azimuth_rad is not None:
-        return _sun_step(params, yaw, math.atan2(dy, dx), float(sun_azimuth_rad),
-                         speed_mps), index, False  # fmt: skip
+        leg = wp[min(index + 1, len(wp) - 1)] - wp[index]
+        leg_rad = math.atan2(leg[1], leg[0]) if np.any(leg != 0.0) else math.atan2(dy, dx)
+        twist = _sun_step(params, yaw, math.atan2(dy, dx), leg_rad, float(sun_azimuth_rad),
+                          speed_mps)  # fmt: skip
+        return twist, index, False
     alpha = _wrap(math.atan2(dy, dx) - yaw)
     if abs(alpha) > params.turn_in_place_rad:
         return np.array([0.0, 0.0, math.copysign(params.max_wz_radps, alpha)]), index, False
@@ -186,12 +202,12 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     return np.array([v, vy, wz]), index, False
 
 
-def _sun_step(params: FollowerParams, yaw: float, course: float, sun_azimuth: float,
-              speed_mps: float) -> np.ndarray:  # fmt: skip
-    """The ``sun`` policy's twist: translate along ``course`` (world frame) at
-    ``speed_mps``, turn towards :func:`sun_heading`; turn in place first when the
-    heading error exceeds ``turn_in_place_rad``."""
-    target = sun_heading(course, sun_azimuth - params.panel_azimuth_rad, params.max_crab_rad)
+def _sun_step(params: FollowerParams, yaw: float, course: float, leg: float,
+              sun_azimuth: float, speed_mps: float) -> np.ndarray:  # fmt: skip
+    """The ``sun`` policy's twist: translate along ``course`` (towards the aim, world
+    frame) at ``speed_mps``, turn towards :func:`sun_heading` on the ``leg`` heading;
+    turn in place first when the heading error exceeds ``turn_in_place_rad``."""
+    target = sun_heading(leg, sun_azimuth - params.panel_azimuth_rad, params.max_crab_rad)
     err = _wrap(target - yaw)
     if abs(err) > params.turn_in_place_rad:
         return np.array([0.0, 0.0, math.copysign(params.max_wz_radps, err)])

@@ -92,7 +92,7 @@ def follower_params(description, heading: HeadingConfig | None = None) -> Follow
     """The on-board path follower's settings for a rover: explicit steer crabs back onto
     the path; skid steer cannot move sideways. ``heading`` (``flight.heading``; default
     ``path``) adds the heading policy, the panel's mount azimuth and the largest crab
-    angle the steering limit allows."""
+    angle it drives: the steering limit, at most 90 deg less ``crab_margin_deg``."""
     skid = description.steering == "skid"
     params = FollowerParams(crab_gain_per_s=0.0 if skid else 0.3)
     if heading is None or heading.policy == "path":
@@ -102,7 +102,8 @@ def follower_params(description, heading: HeadingConfig | None = None) -> Follow
         heading=heading.policy,
         yaw_gain_per_s=float(heading.yaw_gain_per_s),
         panel_azimuth_rad=float(description.solar_panel_azimuth_rad),
-        max_crab_rad=0.0 if skid else min(float(description.steering_limit_rad), 0.5 * math.pi),
+        max_crab_rad=0.0 if skid else min(float(description.steering_limit_rad),
+                                          math.radians(90.0 - heading.crab_margin_deg)),
     )
 
 
