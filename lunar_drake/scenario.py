@@ -33,6 +33,7 @@ from pydrake.visualization import VisualizationConfig
 
 from lunar_drake.autonomy.costmap import HazardConfig, MapConfig
 from lunar_drake.autonomy.ekf import EstimatorConfig
+from lunar_drake.autonomy.follower import HeadingConfig
 from lunar_drake.autonomy.safety import SafetyConfig
 from lunar_drake.comms.images import ImageDownlinkConfig
 from lunar_drake.comms.link import ChannelConfig, LinkConfig
@@ -221,6 +222,9 @@ class FlightConfig:
             (:class:`~lunar_drake.autonomy.safety.SafetyConfig`).
         images: the camera frames sent down the ``images`` topic when the cameras are
             on (:class:`~lunar_drake.comms.images.ImageDownlinkConfig`).
+        heading: how the path follower points the chassis: ``path`` (face the way it
+            drives) or ``sun`` (explicit steer: crab along the path, the solar panel
+            turned to the Sun; :class:`~lunar_drake.autonomy.follower.HeadingConfig`).
     """
 
     rate_hz: float = 50.0
@@ -230,6 +234,7 @@ class FlightConfig:
     estimator: EstimatorConfig = dc.field(default_factory=EstimatorConfig)
     safety: SafetyConfig = dc.field(default_factory=SafetyConfig)
     images: ImageDownlinkConfig = dc.field(default_factory=ImageDownlinkConfig)
+    heading: HeadingConfig = dc.field(default_factory=HeadingConfig)
 
 
 @dc.dataclass
@@ -556,6 +561,12 @@ def validate_scenario(s: Scenario) -> None:
             raise ConfigError(f"flight.estimator.slip_calibration: {exc}") from None
     _section("flight.safety", f.safety.validate)
     _section("flight.images", f.images.validate)
+    _section("flight.heading", f.heading.validate)
+    if f.heading.policy == "sun" and s.rover.description.steering == "skid":
+        raise ConfigError(
+            "flight.heading.policy = 'sun' needs an explicit-steer rover (it crabs along "
+            "the path while its panel faces the Sun); a skid-steer rover allows only 'path'"
+        )
     check_range("ground.rate_hz", s.ground.rate_hz, 0.01, 1000.0, unit=" Hz")
     _validate_route(s)
     check_range("ground.goal_tolerance_m", s.ground.goal_tolerance_m, 0.05, 100.0, unit=" m")

@@ -83,6 +83,15 @@ def test_mission_drives_to_the_goal_through_the_link(cache):
     ground_xy = logs.vectors["ground.pose_estimate"].data[-1, :2]
     truth_xy = logs.vectors["truth.pose"].data[-1, :2]
     assert np.hypot(*(ground_xy - truth_xy)) < 1.0
+    # The default heading policy (`path`): on truth, the rover faces the way it drives
+    # (the crab back onto the path and side slip: a few degrees; tests/test_heading.py
+    # drives `sun`).
+    truth, tw = logs.vectors["truth.pose"], logs.vectors["flight.twist_command"]
+    v = truth.data[:, 6:8]  # world-frame velocity
+    driving = (np.hypot(tw.column("vx_mps"), tw.column("vy_mps")) > 0) & (np.hypot(*v.T) > 0.1)
+    crab = np.arctan2(v[:, 1], v[:, 0]) - truth.column("yaw_rad")
+    crab = np.degrees(np.abs((crab + np.pi) % (2 * np.pi) - np.pi))[driving]
+    assert len(crab) > 300 and np.median(crab) < 2.0 and np.max(crab) < 10.0
 
 
 @pytest.mark.parametrize(

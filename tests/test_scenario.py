@@ -30,6 +30,8 @@ KEPT_AT_DEFAULT = {
     "writes by hand (the default, skid and prospect scenarios calibrate)",
     "power.enabled": "OneOfEverything simulates the power system with its other fields "
     "(tests/test_power_system.py builds a plant with it off)",
+    "flight.heading.policy": "its rover is skid-steer, which allows only the default "
+    "'path' (tests/test_heading.py drives 'sun')",
 }
 
 

@@ -59,16 +59,21 @@ class DriveCommand:
 class GotoCommand:
     """Follow ``waypoints`` ((x, y) site m, from the planned start to the goal) at
     ``speed_mps`` until the estimate is within ``tolerance_m`` of the last one, or
-    ``timeout_s`` has passed."""
+    ``timeout_s`` has passed. ``sun_azimuth_rad``: the Sun's azimuth for the ``sun``
+    heading policy (rad, counter-clockwise from +x of the waypoints' frame; the ground
+    computes it from the ephemeris for the middle of the drive), or None (``path``)."""
 
     waypoints: tuple
     speed_mps: float = 0.2
     tolerance_m: float = 0.5
     timeout_s: float = 600.0
+    sun_azimuth_rad: float | None = None
 
     def size_bytes(self) -> int:
-        """Encoded size: a 4-byte header, three float64 and two float64 a waypoint."""
-        return 4 + 3 * 8 + 16 * len(self.waypoints)
+        """Encoded size: a 4-byte header, three float64, two float64 a waypoint and a
+        float64 with the Sun's azimuth."""
+        sun = 0 if self.sun_azimuth_rad is None else 8
+        return 4 + 3 * 8 + 16 * len(self.waypoints) + sun
 
 
 @dc.dataclass(frozen=True)
@@ -263,6 +268,7 @@ def executor_step(
             twist, index, done = follow_step(
                 pose, active.waypoints, index, speed_mps=active.speed_mps,
                 tolerance_m=active.tolerance_m, params=follower or FollowerParams(),
+                sun_azimuth_rad=active.sun_azimuth_rad,
             )  # fmt: skip
             if done:
                 active, twist = None, None

@@ -12,19 +12,83 @@ explicit-steer rover also **crabs** (``crab_gain_per_s`` > 0): a sideways veloci
 most ``max_crab_fraction`` of the forward speed) pulls it back onto the path without
 turning. The path is done when the estimate is within ``tolerance_m`` of the last
 waypoint.
+
+**Heading policy** (flight ``heading``, :class:`HeadingConfig`; ``FollowerParams.heading``):
+``path`` (the default) is the above: the chassis faces the direction of travel. ``sun``
+(explicit steer only) decouples the two: the chassis velocity points at the aim point
+(a holonomic, crab command: body ``vx, vy`` from the world-frame direction, at
+``speed_mps``), and the body yaw is steered towards the heading that turns the solar
+panel's normal to the Sun's azimuth, ``yaw_des = sun_azimuth - panel_azimuth_rad``, or
+the feasible heading nearest it (:func:`sun_heading`), at ``yaw_gain_per_s`` times the
+heading error, at most ``max_wz_radps``; beyond ``turn_in_place_rad`` of heading error it
+turns in place first. Feasible: the crab angle (the leg's direction in the body frame)
+within ``max_crab_rad`` of the body's +x or -x axis. The steering limit bounds it, and
+so does the wheels' wrap: a wheel steers within +-90 deg, reversing its speed beyond, so
+a crab angle that wanders across +-90 deg (a leg towards or away from the Sun, with the
+panel on the side) flips every wheel by 180 deg at each crossing -- measured on the
+``goto`` site with the crab at 89.5 deg: the flipping wheels lost 2.4 m of the 15 m and
+fooled the estimate -- so ``max_crab_rad`` stays ``crab_margin_deg`` (10 deg) short of
+90 deg. The Sun's azimuth (rad, counter-clockwise from the estimate frame's +x) comes
+with each goto command (:class:`~lunar_drake.autonomy.commands.GotoCommand`; the ground
+computes it from the ephemeris); a goto without one is followed with ``path``.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations`: yaml_load_typed reads HeadingConfig's real
+# field types.
 
 import dataclasses as dc
 import math
 
 import numpy as np
 
+from lunar_drake.errors import ConfigError, check_range
+
+#: ``flight.heading.policy`` values.
+HEADING_POLICIES = ("path", "sun")
+
+
+@dc.dataclass
+class HeadingConfig:
+    """How the chassis is pointed while the follower drives a goto (flight ``heading``).
+
+    Attributes:
+        policy: ``path`` -- face the direction of travel (pure pursuit arcs; the
+            default) -- or ``sun`` -- explicit-steer rovers only: crab along the path
+            while the body yaw keeps the solar panel's normal towards the Sun's
+            azimuth (sent by the ground with each goto; module docstring).
+        yaw_gain_per_s: ``sun``: commanded yaw rate per radian of heading error (1/s),
+            capped at the follower's ``max_wz_radps``.
+        crab_margin_deg: ``sun``: the crab angle is kept at least this far from
+            +-90 deg, where the wheels' steering wraps (module docstring); the panel
+            then loses at most ``1 - cos(margin)`` of its sunlight (1.5 % at 10 deg).
+    """
+
+    policy: str = "path"
+    yaw_gain_per_s: float = 1.0
+    crab_margin_deg: float = 10.0
+
+    def validate(self) -> None:
+        """Checks every field; errors name the field."""
+        if self.policy not in HEADING_POLICIES:
+            raise ConfigError(
+                f"policy = {self.policy!r} is unknown; choose one of {list(HEADING_POLICIES)}"
+            )
+        check_range("yaw_gain_per_s", self.yaw_gain_per_s, 0.0, 100.0, lo_open=True,
+                    unit=" 1/s")  # fmt: skip
+        check_range("crab_margin_deg", self.crab_margin_deg, 0.0, 45.0, unit=" deg")
+
 
 @dc.dataclass(frozen=True)
 class FollowerParams:
-    """Pure-pursuit settings (m, m/s, rad/s, rad)."""
+    """Pure-pursuit settings (m, m/s, rad/s, rad).
+
+    ``heading`` (:data:`HEADING_POLICIES`), ``yaw_gain_per_s``: the heading policy
+    (:class:`HeadingConfig`). ``panel_azimuth_rad``: the solar panel normal's azimuth in
+    the chassis frame (``rover.description.solar_panel_azimuth_rad``). ``max_crab_rad``:
+    the largest crab angle (direction of travel off the body's +x, or off -x driving
+    backwards) the ``sun`` policy drives: the steering limit, less a margin from pi/2
+    (the wheels' wrap; module docstring); pi/2 or more allows any.
+    """
 
     lookahead_m: float = 1.5
     max_wz_radps: float = 0.2
@@ -32,6 +96,10 @@ class FollowerParams:
     min_speed_fraction: float = 0.3
     crab_gain_per_s: float = 0.0
     max_crab_fraction: float = 0.5
+    heading: str = "path"
+    yaw_gain_per_s: float = 1.0
+    panel_azimuth_rad: float = 0.0
+    max_crab_rad: float = math.radians(80.0)
 
 
 def _wrap(a: float) -> float:
@@ -67,9 +135,43 @@ def aim_point(xy, waypoints, index: int, lookahead_m: float) -> tuple[np.ndarray
     return wp[-1].copy(), max(index, n - 2 if n >= 2 else 0)
 
 
+def sun_heading(leg_rad: float, yaw_des_rad: float, max_crab_rad: float) -> float:
+    """The body yaw (rad, in [-pi, pi)) the ``sun`` policy holds on a leg heading
+    ``leg_rad`` (world frame) when the panel wants ``yaw_des_rad``.
+
+    The crab angle ``yaw_des`` needs is ``beta = leg - yaw_des``; the wheels drive it when
+    ``|beta| <= max_crab_rad`` (forwards) or ``|beta| >= pi - max_crab_rad`` (backwards),
+    and then the yaw is ``yaw_des`` (``max_crab_rad >= pi/2``: always). Otherwise the
+    rover drives that leg at the feasible crab angle nearest ``beta`` -- the largest one
+    on that side, forwards or backwards -- i.e. at the feasible yaw nearest ``yaw_des``,
+    which leaves the panel the most sunlight it can have on that leg (its normal
+    ``|beta| - max_crab_rad`` or ``pi - max_crab_rad - |beta|`` off the Sun's azimuth).
+    The panel has one active face, so the turned-round heading ``yaw_des + pi`` is the
+    worst choice, never a compromise. The leg's heading, not the pure-pursuit aim,
+    decides, so the choice does not flicker with the aim.
+    """
+    yaw_des = _wrap(yaw_des_rad)
+    lim = float(max_crab_rad)
+    if lim >= 0.5 * math.pi:
+        return yaw_des
+    beta = _wrap(leg_rad - yaw_des)
+    if abs(beta) <= lim or abs(beta) >= math.pi - lim:
+        return yaw_des
+    feasible = (lim, -lim, math.pi - lim, lim - math.pi)
+    best = min(feasible, key=lambda b: abs(_wrap(b - beta)))
+    return _wrap(leg_rad - best)
+
+
 def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: float,
-                params: FollowerParams | None = None):  # fmt: skip
-    """(twist (vx, vy, wz), new index, done) for the estimated ``pose`` (x, y, yaw)."""
+                params: FollowerParams | None = None,
+                sun_azimuth_rad: float | None = None):  # fmt: skip
+    """(twist (vx, vy, wz), new index, done) for the estimated ``pose`` (x, y, yaw).
+
+    ``sun_azimuth_rad``: the Sun's azimuth (rad, counter-clockwise from the estimate
+    frame's +x); with ``params.heading == "sun"`` the follower crabs along the path and
+    steers the yaw to :func:`sun_heading` (module docstring); without it, or with
+    ``path``, it faces the direction of travel.
+    """
     params = params or FollowerParams()
     x, y, yaw = (float(v) for v in pose)
     wp = np.asarray(waypoints, dtype=float)
@@ -78,6 +180,12 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     aim, index = aim_point((x, y), wp, index, params.lookahead_m)
     dx, dy = aim[0] - x, aim[1] - y
     d = max(math.hypot(dx, dy), 1e-6)
+    if params.heading == "sun" and sun_azimuth_rad is not None:
+        leg = wp[min(index + 1, len(wp) - 1)] - wp[index]
+        leg_rad = math.atan2(leg[1], leg[0]) if np.any(leg != 0.0) else math.atan2(dy, dx)
+        twist = _sun_step(params, yaw, math.atan2(dy, dx), leg_rad, float(sun_azimuth_rad),
+                          speed_mps)  # fmt: skip
+        return twist, index, False
     alpha = _wrap(math.atan2(dy, dx) - yaw)
     if abs(alpha) > params.turn_in_place_rad:
         return np.array([0.0, 0.0, math.copysign(params.max_wz_radps, alpha)]), index, False
@@ -92,6 +200,20 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
         lim = params.max_crab_fraction * v
         vy = max(-lim, min(lim, -params.crab_gain_per_s * e * ny))
     return np.array([v, vy, wz]), index, False
+
+
+def _sun_step(params: FollowerParams, yaw: float, course: float, leg: float,
+              sun_azimuth: float, speed_mps: float) -> np.ndarray:  # fmt: skip
+    """The ``sun`` policy's twist: translate along ``course`` (towards the aim, world
+    frame) at ``speed_mps``, turn towards :func:`sun_heading` on the ``leg`` heading;
+    turn in place first when the heading error exceeds ``turn_in_place_rad``."""
+    target = sun_heading(leg, sun_azimuth - params.panel_azimuth_rad, params.max_crab_rad)
+    err = _wrap(target - yaw)
+    if abs(err) > params.turn_in_place_rad:
+        return np.array([0.0, 0.0, math.copysign(params.max_wz_radps, err)])
+    wz = max(-params.max_wz_radps, min(params.max_wz_radps, params.yaw_gain_per_s * err))
+    beta = course - yaw  # the crab angle: the direction of travel in the body frame
+    return np.array([speed_mps * math.cos(beta), speed_mps * math.sin(beta), wz])
 
 
 def cross_track(xy, waypoints) -> tuple[float, float]:
@@ -110,4 +232,12 @@ def cross_track(xy, waypoints) -> tuple[float, float]:
     return float(e), math.atan2(d[k, 1], d[k, 0])
 
 
-__all__ = ["FollowerParams", "aim_point", "cross_track", "follow_step"]
+__all__ = [
+    "HEADING_POLICIES",
+    "FollowerParams",
+    "HeadingConfig",
+    "aim_point",
+    "cross_track",
+    "follow_step",
+    "sun_heading",
+]

@@ -239,6 +239,14 @@ def onboard_points(points_xy, correction) -> tuple:
     return tuple(out)
 
 
+def onboard_azimuth(azimuth_rad: float, correction) -> float:
+    """An azimuth (rad, counter-clockwise from +x) of the ground's frame in the rover's
+    on-board estimate frame (:func:`onboard_points`: turned by ``-dyaw``), in
+    [-pi, pi)."""
+    a = float(azimuth_rad) - float(correction[2])
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
 def distance_to_path(xy, path) -> float:
     """Horizontal distance (m) from ``xy`` to the polyline ``path`` ((x, y), ...)."""
     p = np.asarray(xy, np.float64)[:2]
@@ -260,7 +268,7 @@ def _set(tup: tuple, k: int, v) -> tuple:
 def operator_step(state: OperatorState, deliveries, *, now: float, params: OperatorParams,
                   planner, start_pose, requests=(), correction=(0.0, 0.0, 0.0),
                   sigma_m: float = 0.0, map_version: int = 0, blocked=None,
-                  preview=None) -> OperatorState:  # fmt: skip
+                  preview=None, sun_azimuth=None) -> OperatorState:  # fmt: skip
     """One ground tick at ``now`` (s).
 
     ``deliveries``: the downlink telemetry inbox (newest handled once); ``requests``:
@@ -273,7 +281,12 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
     ``blocked(path, xy)`` (True when the path from xy now crosses a hazard): when the
     map's version changes while the rover drives a goal, a blocked path is stopped and
     replanned (not counted against ``max_replans``). ``preview(pose, waypoints)``: the
-    predicted path of a goto about to be sent (kept in the state's ``preview``). The
+    predicted path of a goto about to be sent (kept in the state's ``preview``).
+    ``sun_azimuth(t_s)``: the Sun's azimuth (rad, counter-clockwise from the site frame's
+    +x) at time ``t_s``, from the ground's ephemeris, or None; given (the ``sun`` heading
+    policy), each goto carries it for the middle of its planned drive (now plus half
+    the path length over ``drive_speed_mps``), turned into the rover's frame like the
+    waypoints, and ``preview`` is called with ``sun_azimuth_rad=`` it (site frame). The
     returned state's ``outbox`` holds the messages to send now.
     """
     s = state
@@ -359,15 +372,22 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
             return
         length = float(np.sum(np.hypot(*np.diff(np.asarray(wp), axis=0).T))) if len(wp) > 1 else 0
         wp_ground = tuple((float(x), float(y)) for x, y in wp)
+        sun = None
+        if sun_azimuth is not None:  # for the middle of the drive (the Sun ~0.5 deg/h)
+            sun = float(sun_azimuth(now + 0.5 * length / params.drive_speed_mps))
         cmd = GotoCommand(
             waypoints=onboard_points(wp_ground, correction),  # the rover's frame
             speed_mps=params.drive_speed_mps,
             tolerance_m=params.goto_tolerance_m,
             timeout_s=3.0 * length / params.drive_speed_mps + 60.0,
+            sun_azimuth_rad=None if sun is None else onboard_azimuth(sun, correction),
         )
         goto_seq, goto_sent, path = send(cmd), now, wp_ground
         if preview is not None:
-            predicted = (goto_seq, preview(pose, wp_ground))
+            if sun is None:
+                predicted = (goto_seq, preview(pose, wp_ground))
+            else:
+                predicted = (goto_seq, preview(pose, wp_ground, sun_azimuth_rad=sun))
         note("plan", f"{why}: goal {active}, {len(wp)} waypoints, {length:.1f} m")
 
     # A new safing: resume (and replan below).
@@ -550,6 +570,7 @@ __all__ = [
     "distance_to_path",
     "goal_shift_limit_m",
     "ground_pose",
+    "onboard_azimuth",
     "onboard_points",
     "operator_step",
     "reach_radius_m",

@@ -35,10 +35,13 @@ def _arc(x: float, y: float, yaw: float, vx: float, vy: float, wz: float, dt: fl
 
 def preview_goto(*, pose, waypoints, speed_mps: float, tolerance_m: float, rate_hz: float,
                  params: FollowerParams | None = None, height=None, max_time_s: float = 3600.0,
-                 every_s: float = 0.5) -> np.ndarray:  # fmt: skip
+                 every_s: float = 0.5,
+                 sun_azimuth_rad: float | None = None) -> np.ndarray:  # fmt: skip
     """The predicted path (N, 4): (t s, x, y, z m) every ``every_s`` from ``pose`` (x, y,
     yaw; m, rad, site frame) following ``waypoints`` ((x, y), ...) until the follower says
-    done or ``max_time_s``. ``height(x, y)`` gives z (the ground's map; 0 without)."""
+    done or ``max_time_s``. ``height(x, y)`` gives z (the ground's map; 0 without).
+    ``sun_azimuth_rad``: the Sun's azimuth the goto carries (the ``sun`` heading
+    policy; site frame), or None."""
     wp = np.asarray(waypoints, np.float64).reshape(-1, 2)
     x, y, yaw = (float(v) for v in pose)
     dt = 1.0 / float(rate_hz)
@@ -47,7 +50,8 @@ def preview_goto(*, pose, waypoints, speed_mps: float, tolerance_m: float, rate_
     index, k = 0, 0
     while k * dt < max_time_s:
         twist, index, done = follow_step((x, y, yaw), wp, index, speed_mps=speed_mps,
-                                         tolerance_m=tolerance_m, params=params)  # fmt: skip
+                                         tolerance_m=tolerance_m, params=params,
+                                         sun_azimuth_rad=sun_azimuth_rad)  # fmt: skip
         if done:
             break
         x, y, yaw = _arc(x, y, yaw, *(float(v) for v in twist), dt)

@@ -19,11 +19,12 @@ Wiring only. Ports (``<subsystem>.<signal>``):
 
 from __future__ import annotations
 
+import dataclasses as dc
 import math
 
 from pydrake.systems.framework import DiagramBuilder
 
-from lunar_drake.autonomy.follower import FollowerParams
+from lunar_drake.autonomy.follower import FollowerParams, HeadingConfig
 from lunar_drake.scenario import Scenario
 from lunar_drake.systems.command_executor import CommandExecutor
 from lunar_drake.systems.drill import DrillController
@@ -88,10 +89,23 @@ def image_timing(scenario: Scenario) -> tuple[float, float]:
     return period, (cam.delay_s % period) + 1e-6
 
 
-def follower_params(description) -> FollowerParams:
+def follower_params(description, heading: HeadingConfig | None = None) -> FollowerParams:
     """The on-board path follower's settings for a rover: explicit steer crabs back onto
-    the path; skid steer cannot move sideways."""
-    return FollowerParams(crab_gain_per_s=0.0 if description.steering == "skid" else 0.3)
+    the path; skid steer cannot move sideways. ``heading`` (``flight.heading``; default
+    ``path``) adds the heading policy, the panel's mount azimuth and the largest crab
+    angle it drives: the steering limit, at most 90 deg less ``crab_margin_deg``."""
+    skid = description.steering == "skid"
+    params = FollowerParams(crab_gain_per_s=0.0 if skid else 0.3)
+    if heading is None or heading.policy == "path":
+        return params
+    return dc.replace(
+        params,
+        heading=heading.policy,
+        yaw_gain_per_s=float(heading.yaw_gain_per_s),
+        panel_azimuth_rad=float(description.solar_panel_azimuth_rad),
+        max_crab_rad=0.0 if skid else min(float(description.steering_limit_rad),
+                                          math.radians(90.0 - heading.crab_margin_deg)),
+    )
 
 
 def flight_estimator_config(scenario: Scenario):
@@ -125,7 +139,7 @@ def MakeFlightDiagram(*, scenario: Scenario):
             rate_hz=f.rate_hz,
             brake_delay_s=f.brake_delay_s,
             uplink_timeout_s=f.safety.uplink_timeout_s,
-            follower=follower_params(d),
+            follower=follower_params(d, f.heading),
         ),
     )
     power = scenario.power.enabled

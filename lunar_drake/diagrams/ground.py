@@ -129,17 +129,50 @@ def command_preview(scenario: Scenario, *, prior_dem=None):
     from lunar_drake.diagrams.flight import follower_params
 
     g = scenario.ground
-    params = follower_params(scenario.rover.description)
+    params = follower_params(scenario.rover.description, scenario.flight.heading)
     rate = min(scenario.flight.rate_hz, 10.0)
     height = None if prior_dem is None else prior_dem.sample
 
-    def preview(pose, waypoints):
+    def preview(pose, waypoints, sun_azimuth_rad=None):
         return preview_goto(
             pose=(pose[0], pose[1], pose[5]), waypoints=waypoints, speed_mps=g.drive_speed_mps,
             tolerance_m=g.goto_tolerance_m, rate_hz=rate, params=params, height=height,
+            sun_azimuth_rad=sun_azimuth_rad,
         )  # fmt: skip
 
     return preview
+
+
+def sun_azimuth_source(scenario: Scenario):
+    """``sun_azimuth(t_s)`` for the ground when the rover points its panel at the Sun
+    (``flight.heading.policy: sun``), else None: the Sun's azimuth (rad,
+    counter-clockwise from the site frame's +x, grid east) at simulation time ``t_s``,
+    from the ephemeris the ground has before launch (SPICE, the site centre and
+    ``site.epoch_utc``, ``lighting.extra_kernels``; apparent direction, turned into the
+    site's polar grid frame as the plant's ephemeris is). The operator sends it with
+    each goto (:func:`~lunar_drake.autonomy.operations.operator_step`)."""
+    if scenario.flight.heading.policy != "sun":
+        return None
+    from lunar_drake.ephemeris.kernels import ensure_kernels
+    from lunar_drake.ephemeris.sun_earth import (
+        SiteLocation,
+        site_frame_rotation,
+        sun_earth_enu,
+        utc_to_tdb_s,
+    )
+
+    site = SiteLocation(scenario.site.latitude_deg, scenario.site.longitude_deg)
+    extra = tuple(scenario.lighting.extra_kernels)
+    ensure_kernels(extra)
+    epoch = float(utc_to_tdb_s(scenario.site.epoch_utc))
+    R_EG = site_frame_rotation(site)
+
+    def sun_azimuth(t_s: float) -> float:
+        se = sun_earth_enu(epoch_tdb_s=epoch + float(t_s), site=site, extra_kernels=extra)
+        v = R_EG.T @ se.sun_dir_enu
+        return math.atan2(float(v[1]), float(v[0]))
+
+    return sun_azimuth
 
 
 def ground_perception(scenario: Scenario, *, costmap, prior_dem) -> GroundPerception:
@@ -228,6 +261,7 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
             in_map=in_map,
             preview=preview,
             costmap=costmap,
+            sun_azimuth=sun_azimuth_source(scenario),
         ),
     )
     receiver = builder.AddNamedSystem("ground.telemetry", TelemetryReceiver(rate_hz=g.rate_hz))

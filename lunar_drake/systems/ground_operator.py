@@ -71,11 +71,16 @@ class GroundOperator(LeafSystem):
         costmap: the a-priori costmap ``planner`` plans on, or None; kept as
             :attr:`prior_costmap` for the run's logs and plots (plans go through
             ``planner``).
+        sun_azimuth: ``sun_azimuth(t_s)`` -> the Sun's azimuth (rad, counter-clockwise
+            from the site frame's +x; the ground's ephemeris) sent with each goto for
+            the ``sun`` heading policy, or None (``path``: gotos carry none).
     """
 
     def __init__(self, *, params: OperatorParams, rate_hz: float, planner, start_pose,
-                 actions=(), in_map=None, preview=None, costmap=None):  # fmt: skip
+                 actions=(), in_map=None, preview=None, costmap=None,
+                 sun_azimuth=None):  # fmt: skip
         super().__init__()
+        self._sun_azimuth = sun_azimuth
         self.prior_costmap = costmap
         self._params = params
         self._planner = planner
@@ -235,6 +240,7 @@ class GroundOperator(LeafSystem):
             map_version=int(version),
             blocked=blocked,
             preview=self._preview,
+            sun_azimuth=self._sun_azimuth,
         )
         state.get_mutable_abstract_state(self._state).set_value((st, k, ()))
 
