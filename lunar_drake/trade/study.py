@@ -434,8 +434,8 @@ def scenario_key(scenario_yaml: str) -> str:
 
 
 def expand_jobs(study: Study, *, quick: bool = False) -> list[Job]:
-    """Every run of ``study`` (``quick``: its reduced form), resolved and validated, in
-    case-then-replicate order.
+    """Every run of ``study`` (``quick``: its reduced form, whose ``scenario_text`` goes
+    over each case's factors), resolved and validated, in case-then-replicate order.
 
     Raises:
         ConfigError: the base scenario fails to load, or a factor's key or value is
@@ -448,8 +448,10 @@ def expand_jobs(study: Study, *, quick: bool = False) -> list[Job]:
     try:
         base = load_scenario(filename=filename, scenario_name=name,
                              scenario_text=study.scenario_text)  # fmt: skip
-        if quick:
-            base = apply_overrides(base, study.quick_text, source="quick.scenario_text")
+        quick_tree = {}
+        if quick:  # checked here; applied over each case's factors (the quick form wins)
+            apply_overrides(base, study.quick_text, source="quick.scenario_text")
+            quick_tree = yaml.safe_load(study.quick_text) or {}
     except LunarDrakeError as exc:
         line = study.lines.get("quick" if quick else "base")
         raise _err(study.source, line, f"base scenario: {exc}") from None
@@ -472,6 +474,7 @@ def expand_jobs(study: Study, *, quick: bool = False) -> list[Job]:
                     _set_dotted(tree, f.key, value, base_data)
             except ConfigError as exc:
                 raise _err(study.source, f.line, f"factor {f.key}: {exc}") from None
+        _merge(tree, quick_tree)
         for r, seed in enumerate(reps):
             _merge(tree, {"random_seed": seed})
             text = yaml.safe_dump(tree, default_flow_style=False, sort_keys=True)
