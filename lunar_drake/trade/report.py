@@ -89,6 +89,30 @@ def _plot(frame, study: Study, metric: str, path: Path) -> bool:
     return True
 
 
+def _case_table(ok, study: Study) -> list[str]:
+    """Every case: its factor levels and each numeric metric's mean (sd) over the
+    replicates."""
+    import numpy as np
+
+    keys = [m.key for m in study.metrics
+            if m.key in ok and np.issubdtype(ok[m.key].dtype, np.number)]  # fmt: skip
+    if ok.empty or not keys:
+        return []
+    head = [f"`{f.key}`" for f in study.factors] + [f"`{k}`" for k in keys]
+    lines = ["## All cases (mean, sd over the replicates)", "",
+             "| case | " + " | ".join(head) + " | runs |",
+             "|---|" + "---|" * len(study.factors) + "---:|" * len(keys) + "---:|"]  # fmt: skip
+    for case, sub in ok.groupby("case", sort=True):
+        levels = [_level(sub.iloc[0][f.key]) for f in study.factors]
+        cells = []
+        for k in keys:
+            y = sub[k].dropna()
+            sd = f" ({_num(float(y.std()))})" if len(y) > 1 else ""
+            cells.append(_num(float(y.mean())) + sd if len(y) else "-")
+        lines.append(f"| {case} | " + " | ".join(levels + cells) + f" | {len(sub)} |")
+    return [*lines, ""]
+
+
 def write_report(out: Path, *, study: Study, jobs: list[Job], quick: bool) -> list[Path]:
     """Writes ``report.md`` and ``plots/METRIC.png`` into ``out`` from its
     results.csv; returns the paths."""
@@ -149,6 +173,7 @@ def write_report(out: Path, *, study: Study, jobs: list[Job], quick: bool) -> li
                 lines.append(f"| {case} | {vals} | {_num(r['mean'])} | "
                              f"{_num(r['std'] if r['count'] > 1 else None)} | {int(r['count'])} |")
             lines.append("")
+    lines += _case_table(ok, study)
     failed = frame[frame["status"] != "ok"]
     if len(failed):
         lines += ["## Failed runs", "", "| case | replicate | error |", "|---|---:|---|"]
