@@ -29,6 +29,15 @@ WORKER_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
 }
+#: dask settings for the local cluster: its housekeeping (the event-loop tick, the
+#: workers' statistical profiler and GIL monitor) costs a few percent of a core per
+#: process, which a study of CPU-bound runs on every core pays in full.
+CLUSTER_CONFIG = {
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.admin.system-monitor.gil.enabled": False,
+    "distributed.worker.profile.enabled": False,
+}
 #: Seconds to wait for a remote scheduler before giving up.
 CONNECT_TIMEOUT_S = 5.0
 _ADDRESS = re.compile(r"(tcp|tls|inproc|ucx|ws|wss)://[^\s/]+(:\d+)?$")
@@ -157,14 +166,23 @@ def run_study(
         KeyboardInterrupt: after Ctrl-C, once the finished rows and results.csv are
             written.
     """
-    from lunar_drake.cli._common import plural
-    from lunar_drake.files import atomic_write_text
-
     t0 = time.perf_counter()
     out = Path(out)
     jobs = expand_jobs(study, quick=quick)
     text = resolved_study_text(study, quick=quick)
     prepare_output(out, study_text=text, resume=resume)
+    import dask
+
+    with dask.config.set(CLUSTER_CONFIG):
+        return _run_study(study=study, out=out, jobs=jobs, text=text, workers=workers,
+                          scheduler=scheduler, quick=quick, progress=progress, echo=echo,
+                          t0=t0)  # fmt: skip
+
+
+def _run_study(*, study, out, jobs, text, workers, scheduler, quick, progress, echo, t0):
+    from lunar_drake.cli._common import plural
+    from lunar_drake.files import atomic_write_text
+
     client, cluster = connect(workers=workers, scheduler=scheduler)
     run = StudyRun(out=out, study=study, jobs=jobs, rows={}, dashboard=_dashboard(client))
     try:
