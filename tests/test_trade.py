@@ -259,3 +259,17 @@ def test_a_study_runs_on_a_real_scheduler_with_two_workers(tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+@pytest.mark.slow
+def test_slip_study_runs_on_the_study_engine_with_the_same_rows(tmp_path):
+    """slip-study keeps its command; with --workers > 1 its cases run on the trade
+    engine (dask.distributed) and slip.csv is the same bytes as in one process."""
+    from lunar_drake.studies.slip_study import run_slip_study
+
+    kw = dict(rovers=["explicit"], slopes_deg=[8.0], distance_m=0.4, seeds=2, progress=False)
+    run_slip_study(out_dir=tmp_path / "one", workers=1, **kw)
+    run_slip_study(out_dir=tmp_path / "two", workers=2, **kw)
+    one = (tmp_path / "one" / "slip.csv").read_bytes()
+    assert one == (tmp_path / "two" / "slip.csv").read_bytes()
+    assert len(one.decode().splitlines()) == 3  # header + two seeds

@@ -29,6 +29,7 @@ def command(args) -> int:
         roughness_m=args.roughness,
         data=data,
         workers=args.workers,
+        scheduler=args.scheduler,
         progress=not args.no_progress,
     )
     print(
@@ -69,7 +70,10 @@ def add_parser(sub) -> None:
         "--data", default=None, help="measured slope_deg,slip CSV to draw on slip.png (optional)"
     )
     ss.add_argument("--speed", type=positive_float, default=0.1, help="commanded m/s")
-    ss.add_argument("--workers", type=positive_int, default=1, help="parallel processes")
+    ss.add_argument("--workers", type=positive_int, default=1,
+                    help="parallel processes (dask.distributed, as lunar-drake trade)")
+    ss.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="an existing dask scheduler (tcp://HOST:PORT) for the cases")
     ss.add_argument("--out", required=True)
     ss.add_argument("--no-progress", action="store_true")
     ss.set_defaults(func=command)

@@ -320,12 +320,15 @@ def run_slip_study(
     roughness_m: float = 0.0,
     data=None,
     workers: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
 ) -> list[dict]:
     """Runs every (rover, slope, seed) case and writes slip.csv, params.json and slip.png.
 
-    Cases run in parallel processes with dask when ``workers > 1``; results do not depend
-    on the worker count. ``data``: optional measured (slope_deg, slip) arrays drawn on
+    Cases run on the trade-study engine (dask.distributed:
+    :func:`lunar_drake.trade.engine.map_on_cluster`) when ``workers > 1`` or with a
+    ``scheduler`` address, else in this process; results do not depend on the worker
+    count. ``data``: optional measured (slope_deg, slip) arrays drawn on
     slip.png (e.g. the data a soil was fitted to).
     """
     if seeds < 1:
@@ -345,14 +348,11 @@ def run_slip_study(
         for k in range(seeds)
     ]
     out_dir = ensure_output_dir(out_dir, what="--out directory")
-    if workers > 1:
-        import dask
+    if workers > 1 or scheduler:
+        from lunar_drake.trade.engine import map_on_cluster
 
-        results = dask.compute(
-            *[dask.delayed(run_slip_case)(c) for c in cases],
-            scheduler="processes",
-            num_workers=workers,
-        )
+        results = map_on_cluster(run_slip_case, cases, workers=workers, scheduler=scheduler,
+                                 progress=progress, desc="slip study")  # fmt: skip
     else:
         results = []
         it = cases

@@ -223,6 +223,39 @@ def _run_study(*, study, out, jobs, text, workers, scheduler, quick, progress, e
     return run
 
 
+def map_on_cluster(fn, items: list, *, workers: int = 2, scheduler: str | None = None,
+                   progress: bool = True, desc: str = "runs") -> list:
+    """``[fn(item) for item in items]`` on the study engine (a LocalCluster of
+    ``workers`` single-threaded processes, or ``scheduler``), in the items' order, with
+    a progress bar: for the studies that are not scenario missions (``slip-study``).
+    ``fn`` and the items must pickle; an exception in one re-raises here.
+
+    Raises:
+        ConfigError: a malformed or unreachable scheduler, workers < 1.
+    """
+    import dask
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    with dask.config.set(CLUSTER_CONFIG):
+        client, cluster = connect(workers=workers, scheduler=scheduler)
+        try:
+            futures = client.map(fn, items, pure=False)
+            index = {f.key: k for k, f in enumerate(futures)}
+            out = [None] * len(items)
+            with tqdm(total=len(items), desc=desc, unit="run", disable=not progress) as bar:
+                for fut in as_completed(futures):
+                    out[index[fut.key]] = fut.result()
+                    bar.update(1)
+            return out
+        finally:
+            with contextlib.suppress(Exception):
+                client.close()
+            if cluster is not None:
+                with contextlib.suppress(Exception):
+                    cluster.close()
+
+
 def _run_jobs(client, study: Study, todo: list[Job], run: StudyRun, *, progress: bool) -> None:
     from distributed import as_completed
     from tqdm import tqdm
