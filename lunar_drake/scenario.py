@@ -332,7 +332,8 @@ class GroundConfig:
         max_extrapolation_s: the ground carries the downlinked pose forward along the
             commanded twist for at most this long (s).
         ack_timeout_s: a goto (or resume) that telemetry has not acknowledged after this
-            long is taken as lost and sent again, replanned (s).
+            long plus the round trip (twice the measured telemetry latency) is taken as
+            lost and sent again, replanned (s).
         max_resends: at most this many times per goal (or resume).
         resume_soc: after a ``low_soc`` safing the rover stays parked, charging, until
             telemetry reports this state of charge; then the automatic resume.

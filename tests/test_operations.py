@@ -250,14 +250,14 @@ class Ground:
         return [tuple(start), tuple(goal)]
 
     def telemetry(self, t, *, xy, mode, command_seq=None, motion_seq=-1, changes=0,
-                  reason=0, twist=(0, 0, 0), brake=1, power=None):  # fmt: skip
+                  reason=0, twist=(0, 0, 0), brake=1, power=None, latency=0.0):  # fmt: skip
         from lunar_drake.autonomy.commands import MODES
 
         cs = max(motion_seq, 0) if command_seq is None else command_seq
         status = [MODES.index(mode), cs, reason, changes, motion_seq]
         packet = pack_telemetry(pose_estimate=[xy[0], xy[1], 0, 0, 0, 0], twist_command=twist,
                                 brake=brake, status=status, power=power)  # fmt: skip
-        self.inbox += (Delivery(Message("telemetry", self.tel_seq, t, packet, 0), t),)
+        self.inbox += (Delivery(Message("telemetry", self.tel_seq, t - latency, packet, 0), t),)
         self.tel_seq += 1
 
     def tick(self, t, *requests, heartbeats=False, **kw):
@@ -398,6 +398,20 @@ def test_a_goto_never_acknowledged_fails_its_goal_after_max_resends():
     assert "not acknowledged after 2 resends" in next(
         e.detail for e in g.state.events.items() if e.kind == "goal_failed"
     )
+
+
+def test_the_acknowledgement_timeout_waits_for_the_round_trip():
+    """A 10 s one-way delay: telemetry arrives 10 s old, so a goto's acknowledgement
+    cannot come back before 20 s plus the telemetry period; the ground waits
+    ack_timeout_s plus twice the measured latency before taking the goto as lost."""
+    g = Ground(params=OperatorParams(ack_timeout_s=20.0, heartbeat_s=5.0, max_resends=3))
+    g.tick(0.0, Request("goal", (10.0, 0.0)))
+    for t in np.arange(10.0, 40.0, 1.0):  # the rover idle, the goto not yet there
+        g.telemetry(float(t), xy=(0, 0), mode="idle", latency=10.0)
+        assert g.tick(float(t) + 0.05) == [], t
+    g.telemetry(40.0, xy=(0, 0), mode="idle", latency=10.0)
+    out = g.tick(40.1)  # 20 s + 2 x 10 s: now it is lost
+    assert [type(c) for c in out] == [StopCommand, GotoCommand]
 
 
 def test_stop_pauses_goals_resume_replans_and_deviation_replans():

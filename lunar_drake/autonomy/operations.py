@@ -20,7 +20,9 @@ returns the commands to send up:
 * **safed**: when telemetry reports a new safing, the ground (``auto_resume``, at most
   ``max_resumes`` resumes sent in a run, resent ones included) sends a resume and a goto
   replanned from the estimate, in one uplink pass (the executor handles them in order).
-* **lost**: a goto telemetry has not acknowledged after ``ack_timeout_s`` is sent again,
+* **lost**: a goto telemetry has not acknowledged after ``ack_timeout_s`` plus the
+  round trip (twice the newest telemetry packet's measured latency: a symmetric link
+  assumed; without it a 10 s one-way delay made every goto look lost) is sent again,
   replanned and after a stop (with a resume if the rover is safed and resumes are
   left), at most ``max_resends`` times, then the goal fails; a resume not acknowledged
   (the rover still safed, its command seq older) is sent again as often.
@@ -303,6 +305,9 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
     else:
         pose = ground_pose(packet, t_sent, now, max_extrapolation_s=params.max_extrapolation_s)
     pose = corrected_pose(pose, correction)
+    # How long an acknowledgement may take: the timeout plus the round trip, measured.
+    rtt = 2.0 * (t_recv - t_sent) if packet is not None else 0.0
+    ack_timeout = params.ack_timeout_s + (rtt if math.isfinite(rtt) else 0.0)
     goals, status, active, paused = s.goals, s.status, s.active, s.paused
     goto_seq, path, replans, resumes = s.goto_seq, s.path, s.replans, s.resumes
     goto_sent, resends = s.goto_sent_s, s.resends
@@ -427,7 +432,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
         and mode == "safed"
         and resume_seq >= 0
         and packet[_F["command_seq"]] < resume_seq
-        and now - resume_sent > params.ack_timeout_s
+        and now - resume_sent > ack_timeout
         and resume_resends < params.max_resends
         and not any(isinstance(m.payload, ResumeCommand) for m in out)
     ):
@@ -475,7 +480,7 @@ def operator_step(state: OperatorState, deliveries, *, now: float, params: Opera
                 plan_goto("after a resume" if resumed else "start")
                 if active < 0:
                     start_next()
-        elif not acked and now - goto_sent > params.ack_timeout_s:
+        elif not acked and now - goto_sent > ack_timeout:
             # Not acknowledged: lost on the way up (an outage, out of sight of Earth), or
             # ignored by a safed rover.
             note("no_ack", f"goto seq {goto_seq} sent at {goto_sent:.1f} s")
