@@ -273,3 +273,23 @@ def test_slip_study_runs_on_the_study_engine_with_the_same_rows(tmp_path):
     one = (tmp_path / "one" / "slip.csv").read_bytes()
     assert one == (tmp_path / "two" / "slip.csv").read_bytes()
     assert len(one.decode().splitlines()) == 3  # header + two seeds
+
+
+@pytest.mark.slow
+def test_two_studies_in_one_fresh_process(tmp_path):
+    """The engine's dask settings go over distributed's defaults and come off again: a
+    second study in the same process (a notebook's second run) still starts its
+    cluster. In a fresh interpreter, where nothing imported distributed before."""
+    study = _study(TINY.replace("simulation_duration: 3", "simulation_duration: 0.5")
+                   .replace("[0.1, 0.3]", "[0.1]"), tmp_path)  # fmt: skip
+    code = ("from lunar_drake.trade.engine import run_study\n"
+            "from lunar_drake.trade.study import load_study\n"
+            "if __name__ == '__main__':\n"
+            "    for k in range(2):\n"
+            f"        r = run_study(study=load_study({str(study)!r}), out={str(tmp_path)!r}"
+            " + f'/out{k}', workers=1, progress=False)\n"
+            "        assert r.failed == 0 and len(r.rows) == 1\n"
+            "    print('ok')\n")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, check=False)  # fmt: skip
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-2000:]

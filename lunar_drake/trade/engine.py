@@ -31,7 +31,9 @@ WORKER_ENV = {
 }
 #: dask settings for the local cluster: its housekeeping (the event-loop tick, the
 #: workers' statistical profiler and GIL monitor) costs a few percent of a core per
-#: process, which a study of CPU-bound runs on every core pays in full.
+#: process, which a study of CPU-bound runs on every core pays in full. Set only once
+#: ``distributed`` is imported: leaving a ``dask.config.set`` made before its defaults
+#: loaded would take the whole ``distributed`` section with it.
 CLUSTER_CONFIG = {
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "2s",
@@ -172,6 +174,7 @@ def run_study(
     text = resolved_study_text(study, quick=quick)
     prepare_output(out, study_text=text, resume=resume)
     import dask
+    import distributed  # noqa: F401  (its config defaults load before ours go over them)
 
     with dask.config.set(CLUSTER_CONFIG):
         return _run_study(study=study, out=out, jobs=jobs, text=text, workers=workers,
@@ -234,7 +237,7 @@ def map_on_cluster(fn, items: list, *, workers: int = 2, scheduler: str | None =
         ConfigError: a malformed or unreachable scheduler, workers < 1.
     """
     import dask
-    from distributed import as_completed
+    from distributed import as_completed  # (its config defaults load before ours)
     from tqdm import tqdm
 
     with dask.config.set(CLUSTER_CONFIG):
