@@ -93,7 +93,9 @@ def connect(*, workers: int, scheduler: str | None):
         silence_logs=logging.ERROR,
         env=WORKER_ENV,
     )
-    return Client(cluster), cluster
+    client = Client(cluster)
+    client.wait_for_workers(workers)  # all of them up before the first task is placed
+    return client, cluster
 
 
 def _dashboard(client) -> str | None:
@@ -266,8 +268,12 @@ def _run_jobs(client, study: Study, todo: list[Job], run: StudyRun, *, progress:
     from lunar_drake.trade.case import run_case
 
     keys = tuple(m.key for m in study.metrics)
+    # One task prefix for every run: dask then queues them on the scheduler and hands one
+    # to each worker as it frees up (unique prefixes were assigned up front, to whichever
+    # workers had started: 10 and 6 runs of 16 on two workers, a speedup of 1.62).
     futures = {
-        client.submit(run_case, job.scenario_yaml, keys, key=f"{job.id}-{job.key}", pure=False): job
+        client.submit(run_case, job.scenario_yaml, keys, key=f"lunar_drake_run-{job.id}-{job.key}",
+                      pure=False): job
         for job in todo
     }
     bar = tqdm(total=len(run.jobs), initial=len(run.jobs) - len(todo), unit="run",
