@@ -98,6 +98,16 @@ def connect(*, workers: int, scheduler: str | None):
     return client, cluster
 
 
+def disconnect(client, cluster) -> None:
+    """Closes the client and the LocalCluster it owns (None: a remote scheduler, left
+    running), whatever state they are in."""
+    with contextlib.suppress(Exception):
+        client.close()
+    if cluster is not None:
+        with contextlib.suppress(Exception):
+            cluster.close()
+
+
 def _dashboard(client) -> str | None:
     with contextlib.suppress(Exception):
         return client.dashboard_link
@@ -212,11 +222,7 @@ def _run_study(*, study, out, jobs, text, workers, scheduler, quick, progress, e
     except KeyboardInterrupt:
         run.interrupted = True
     finally:
-        with contextlib.suppress(Exception):
-            client.close()
-        if cluster is not None:
-            with contextlib.suppress(Exception):
-                cluster.close()
+        disconnect(client, cluster)
     run.failed = sum(r["status"] != "ok" for r in run.rows.values())
     run.files = results.write_results(out, study=study, jobs=jobs, rows=run.rows)
     if run.interrupted:
@@ -254,11 +260,7 @@ def map_on_cluster(fn, items: list, *, workers: int = 2, scheduler: str | None =
                     bar.update(1)
             return out
         finally:
-            with contextlib.suppress(Exception):
-                client.close()
-            if cluster is not None:
-                with contextlib.suppress(Exception):
-                    cluster.close()
+            disconnect(client, cluster)
 
 
 def _run_jobs(client, study: Study, todo: list[Job], run: StudyRun, *, progress: bool) -> None:
