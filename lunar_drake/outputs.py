@@ -14,7 +14,8 @@ neutron spectrometer's records as the ground received them and its hydrogen map;
 temperature as received; with ``sensors.nirvss``), ``drill.csv`` (drill samples read
 by NIRVSS; with ``sensors.drill``), ``ground_map.png`` (the ground's final
 costmap round the traverse: :mod:`lunar_drake.ground_map`), ``calibration.yaml`` (the
-stereo rig, OpenCV style; with the cameras on), ``frames/`` (written during the
+stereo rig, OpenCV style; with the cameras on), ``run.mcap`` (the run for Foxglove:
+:mod:`lunar_drake.mission_control.recording`), ``frames/`` (written during the
 simulation) and ``meshcat.html`` (with Meshcat).
 The CLI builds it in a temporary sibling directory and swaps it in when complete
 (:func:`lunar_drake.files.staged_directory`).
@@ -76,6 +77,7 @@ RUN_DIR_NAMES = frozenset(
         *SCIENCE_FILES,
         "ground_map.png",
         "calibration.yaml",
+        "run.mcap",
         "frames",
         "meshcat.html",
     ]
@@ -192,6 +194,7 @@ def run_files() -> list[str]:
         "modes.csv",
         "ground_events.csv",
         "images.csv",
+        "run.mcap",
     ]
 
 
@@ -292,6 +295,10 @@ def write_run(
             camera=scenario.sensors.camera, description=scenario.rover.description
         ).write(out / "calibration.yaml")
         paths.append(out / "calibration.yaml")
+    from lunar_drake.mission_control.recording import write_run_mcap
+
+    paths.append(write_run_mcap(out, costmap=logs.ground_costmap,
+                                prior_costmap=logs.ground_prior_costmap))  # fmt: skip
     if meshcat_html is not None:
         paths.append(atomic_write_text(out / "meshcat.html", meshcat_html))
     return paths

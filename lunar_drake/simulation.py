@@ -1,6 +1,7 @@
 """simulate(): build the mission diagram, run it, and return what it recorded.
 
-The CLI, notebooks, the slip study and trade sweeps all make the same three calls::
+The CLI, notebooks, the slip study, trade sweeps and the mission-control server all
+make the same three calls::
 
     logs = simulate(scenario=scenario, site=site)        # this module
     summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
@@ -14,6 +15,7 @@ so it pickles (sweeps run it in worker processes).
 from __future__ import annotations
 
 import dataclasses as dc
+import math
 import re
 import time
 from collections.abc import Callable
@@ -156,35 +158,67 @@ def _system_names(system) -> list[str]:
     return out
 
 
-def simulate(
-    *,
-    scenario: Scenario,
-    site: SiteData,
-    meshcat=None,
-    progress: bool = False,
-    frames_dir: str | Path | None = None,
-    stop_when: StopCheck | None = None,
-    stop_check_period_s: float = 0.5,
-    stop_after_goals_s: float | None = None,
-) -> SimulationLogs:
-    """Simulates ``scenario`` on ``site`` for ``scenario.simulation_duration`` seconds.
+@dc.dataclass
+class MissionRun:
+    """A built mission ready to run (:func:`build_mission`), then run
+    (:func:`run_mission`) and read (:func:`collect_logs`).
 
-    The run stops early, cleanly, when the rover leaves the terrain, when
-    ``stop_when(t, truth_pose)`` (checked every ``stop_check_period_s`` of simulated
-    time; ``truth_pose`` as ``truth.pose``) returns a reason, or, with
-    ``stop_after_goals_s``, that many seconds after the ground has judged every one of
-    its goals (reached or failed; a sweep's missions need not idle to the end).
-
-    Args:
-        meshcat: a pydrake Meshcat to draw in (and record), or None (headless).
-        progress: show a progress bar in simulated seconds with the real-time factor.
-        frames_dir: write camera frames there (when the cameras are enabled).
-
-    Raises:
-        SimulationError: the integrator failed; the message has the simulated time.
+    Attributes:
+        scenario, site: what it was built from.
+        mission: the mission diagram (``MakeMissionDiagram``).
+        diagram: the root diagram (the mission, its loggers and the frame writer).
+        simulator: the Drake Simulator on ``diagram``.
+        map_product: the ground's pre-flight map product.
+        build_s: wall time spent building (s).
+        wall: wall-clock timing of the run so far (s; not deterministic).
     """
+
+    scenario: Scenario
+    site: SiteData
+    mission: object
+    diagram: object
+    simulator: object
+    map_product: object
+    loggers: dict
+    writer: object = None
+    meshcat: object = None
+    build_s: float = 0.0
+    wall: dict = dc.field(default_factory=dict)
+
+    @property
+    def root(self):
+        """The simulator's root context (mutable: the operator API takes it)."""
+        return self.simulator.get_mutable_context()
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time reached (s)."""
+        return float(self.simulator.get_context().get_time())
+
+    @property
+    def operator(self):
+        """The ground's operator API (:class:`~lunar_drake.systems.ground_operator.
+        GroundOperator`: ``send_goal(run.root, ...)``, ``stop``, ``resume``, ...)."""
+        return self.mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")
+
+    def ground_system(self, name: str):
+        """The ground subsystem ``name`` (e.g. ``ground.telemetry``), or None."""
+        ground = self.mission.GetSubsystemByName("ground")
+        return ground.GetSubsystemByName(name) if ground.HasSubsystemNamed(name) else None
+
+
+#: ``observer(run)`` is called between ``AdvanceTo`` calls of a run with observers (every
+#: ``observe_period_s`` of simulated time); it may read the run, queue operator requests
+#: on ``run.root`` and return a reason to stop the run (or None).
+Observer = Callable[[MissionRun], "str | None"]
+
+
+def build_mission(*, scenario: Scenario, site: SiteData, meshcat=None,
+                  frames_dir: str | Path | None = None) -> MissionRun:  # fmt: skip
+    """Builds ``scenario``'s mission on ``site`` with its loggers (and a frame writer into
+    ``frames_dir`` when given and the cameras are on) under a configured Simulator."""
     from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
-    from pydrake.systems.framework import DiagramBuilder, EventStatus
+    from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import LogVectorOutput
 
     from lunar_drake import preflight
@@ -228,16 +262,57 @@ def simulate(
     diagram.set_name("run")
     simulator = Simulator(diagram)
     ApplySimulatorConfig(scenario.simulator_config, simulator)
+    return MissionRun(scenario=scenario, site=site, mission=mission, diagram=diagram,
+                      simulator=simulator, map_product=map_product, loggers=loggers,
+                      writer=writer, meshcat=meshcat,
+                      build_s=time.perf_counter() - t0)  # fmt: skip
+
+
+def run_mission(
+    run: MissionRun,
+    *,
+    progress: bool = False,
+    stop_when: StopCheck | None = None,
+    stop_check_period_s: float = 0.5,
+    stop_after_goals_s: float | None = None,
+    realtime_rate: float | None = None,
+    observers: tuple = (),
+    observe_period_s: float = 0.1,
+) -> str:
+    """Runs ``run`` to ``scenario.simulation_duration`` (or an earlier stop) and returns
+    why it stopped ("duration reached", or the reason).
+
+    The run stops early, cleanly, when the rover leaves the terrain, when
+    ``stop_when(t, truth_pose)`` (checked every ``stop_check_period_s`` of simulated
+    time; ``truth_pose`` as ``truth.pose``) returns a reason, with
+    ``stop_after_goals_s`` that many seconds after the ground has judged every one of its
+    goals (reached or failed), or when an observer returns a reason.
+
+    Args:
+        realtime_rate: pace the run to this multiple of real time (Drake's target
+            realtime rate; 0: as fast as it can); None keeps the scenario's.
+        observers: :data:`Observer` callables; with any, the run advances in steps of
+            ``observe_period_s`` (s) and calls each between them. Pacing changes when
+            things happen on the wall clock, never what happens.
+
+    Raises:
+        SimulationError: the integrator failed; the message has the simulated time.
+    """
+    from pydrake.systems.framework import EventStatus
+
+    scenario, mission, diagram, simulator = run.scenario, run.mission, run.diagram, run.simulator
+    if realtime_rate is not None:
+        simulator.set_target_realtime_rate(float(realtime_rate))
     root = simulator.get_mutable_context()
     mctx = mission.GetMyContextFromRoot(root)
     off_port = mission.GetOutputPort("truth.off_terrain")
     pose_port = mission.GetOutputPort("truth.pose")
-    hf = site.heightfield
+    hf = run.site.heightfield
     end = float(scenario.simulation_duration)
     stop_reason = ["duration reached"]
     bar = _progress_bar(end, progress)
     clock = {"next_check": 0.0, "next_bar": 0.0, "wall0": None, "goals_done": None}
-    operator = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.operator")
+    operator = run.operator
     op_ctx = operator.GetMyContextFromRoot(root)
 
     def monitor(context):
@@ -273,18 +348,38 @@ def simulate(
             _update_bar(bar, t, time.perf_counter() - clock["wall0"])
         return EventStatus.DidNothing()
 
+    def advance() -> None:
+        if not observers:
+            simulator.AdvanceTo(end)
+            return
+        step = float(observe_period_s)
+        k = 0
+        while True:
+            for observe in observers:
+                why = observe(run)
+                if why:
+                    stop_reason[0] = why
+                    return
+            t = root.get_time()
+            if t >= end or stop_reason[0] != "duration reached":
+                return
+            k = max(k + 1, math.floor(t / step + 1e-9) + 1)
+            status = simulator.AdvanceTo(min(k * step, end))
+            if status.reason() == status.ReturnReason.kReachedTerminationCondition:
+                return
+
     simulator.set_monitor(monitor)
-    if meshcat is not None:
-        meshcat.StartRecording(set_visualizations_while_recording=True)
+    if run.meshcat is not None:
+        run.meshcat.StartRecording(set_visualizations_while_recording=True)
     sigint = interrupts.LatchedSigint()
+    t_sim = t_start = time.perf_counter()
     try:
         if interrupts.requested():  # Ctrl-C while building, its exception swallowed
             raise KeyboardInterrupt
-        t_built = time.perf_counter()
-        clock["wall0"] = t_built - 1e-9
+        clock["wall0"] = t_start - 1e-9
         try:
             simulator.Initialize()
-            simulator.AdvanceTo(end)
+            advance()
         except (KeyboardInterrupt, SimulationError):
             raise
         except Exception as exc:  # Drake raises RuntimeError on integrator failures.
@@ -297,24 +392,38 @@ def simulate(
             ) from exc
         t_sim = time.perf_counter()
         if bar is not None:
-            _update_bar(bar, root.get_time(), t_sim - t_built)
+            _update_bar(bar, root.get_time(), t_sim - t_start)
     finally:
         sigint.restore()
         if bar is not None:
             bar.close()
-    if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
+        simulator.clear_monitor()
+    if run.meshcat is not None:
+        run.meshcat.StopRecording()
+        run.meshcat.PublishRecording()
     simulated = float(root.get_time())
+    run.wall = {
+        "build_s": run.build_s,
+        "simulate_s": t_sim - t_start,
+        "realtime_factor": simulated / (t_sim - t_start) if t_sim > t_start else None,
+    }
+    return stop_reason[0]
+
+
+def collect_logs(run: MissionRun, *, stop_reason: str) -> SimulationLogs:
+    """What ``run`` recorded so far, as plain arrays and dataclasses."""
+    from lunar_drake import preflight
+
+    mission, root = run.mission, run.simulator.get_context()
     vectors = {}
-    for name, logger in loggers.items():
+    for name, logger in run.loggers.items():
         log = logger.FindLog(root)
         vectors[name] = VectorLog(
             times=np.array(log.sample_times()),
             data=np.array(log.data()).T,
             columns=LOGGED_PORTS[name],
         )
-    receiver = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.telemetry")
+    receiver = run.ground_system("ground.telemetry")
     received = receiver.received(receiver.GetMyContextFromRoot(root))
     telemetry = ReceivedTelemetry(
         seq=np.array([d.message.seq for d in received], dtype=np.int64),
@@ -328,34 +437,33 @@ def simulate(
     for name in ("uplink", "downlink"):
         sys = mission.GetSubsystemByName(name)
         link += sys.records(sys.GetMyContextFromRoot(root))
+    writer = run.writer
     frames = writer.frames_written(writer.GetMyContextFromRoot(root)) if writer else 0
     executor = mission.GetSubsystemByName("flight").GetSubsystemByName("flight.executor")
     transitions = executor.executor_state(executor.GetMyContextFromRoot(root)).transitions.items()
+    operator = run.operator
     ops = operator.operator_state(root)
     images = []
-    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.images"):
-        rx = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.images")
+    if (rx := run.ground_system("ground.images")) is not None:
         images = [
             (d.t_received_s, d.message.t_sent_s, d.message.payload.frame_index,
              d.message.payload.codec, d.message.size_bytes)
             for d in rx.received(rx.GetMyContextFromRoot(root))
         ]  # fmt: skip
     science = []
-    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.science"):
-        rx = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.science")
+    if (rx := run.ground_system("ground.science")) is not None:
         science = [(d.t_received_s, d.message.payload)
                    for d in rx.received(rx.GetMyContextFromRoot(root))]  # fmt: skip
     keyframes, costmap, prior = [], operator.prior_costmap, operator.prior_costmap
     first_lethal = None
-    if mission.GetSubsystemByName("ground").HasSubsystemNamed("ground.perception"):
-        gp = mission.GetSubsystemByName("ground").GetSubsystemByName("ground.perception")
+    if (gp := run.ground_system("ground.perception")) is not None:
         pst = gp.perception_state(root)
         keyframes, costmap = pst.records.items(), pst.costmap
         first_lethal = pst.first_lethal_s
         prior = gp.costmap_output.Allocate().get_value()[1]  # the prior, refined
     return SimulationLogs(
-        simulated_s=simulated,
-        stop_reason=stop_reason[0],
+        simulated_s=float(root.get_time()),
+        stop_reason=stop_reason,
         systems=sorted(_system_names(mission)),
         vectors=vectors,
         telemetry=telemetry,
@@ -370,13 +478,43 @@ def simulate(
         ground_costmap=costmap,
         ground_prior_costmap=prior,
         ground_first_lethal_s=first_lethal,
-        preflight=preflight.describe(scenario, map_product=map_product),
-        wall={
-            "build_s": t_built - t0,
-            "simulate_s": t_sim - t_built,
-            "realtime_factor": simulated / (t_sim - t_built) if t_sim > t_built else None,
-        },
+        preflight=preflight.describe(run.scenario, map_product=run.map_product),
+        wall=dict(run.wall),
     )
+
+
+def simulate(
+    *,
+    scenario: Scenario,
+    site: SiteData,
+    meshcat=None,
+    progress: bool = False,
+    frames_dir: str | Path | None = None,
+    stop_when: StopCheck | None = None,
+    stop_check_period_s: float = 0.5,
+    stop_after_goals_s: float | None = None,
+    realtime_rate: float | None = None,
+    observers: tuple = (),
+    observe_period_s: float = 0.1,
+) -> SimulationLogs:
+    """Simulates ``scenario`` on ``site`` for ``scenario.simulation_duration`` seconds:
+    :func:`build_mission`, :func:`run_mission` (see it for the stop conditions, pacing
+    and observers), :func:`collect_logs`.
+
+    Args:
+        meshcat: a pydrake Meshcat to draw in (and record), or None (headless).
+        progress: show a progress bar in simulated seconds with the real-time factor.
+        frames_dir: write camera frames there (when the cameras are enabled).
+
+    Raises:
+        SimulationError: the integrator failed; the message has the simulated time.
+    """
+    run = build_mission(scenario=scenario, site=site, meshcat=meshcat, frames_dir=frames_dir)
+    why = run_mission(run, progress=progress, stop_when=stop_when,
+                      stop_check_period_s=stop_check_period_s,
+                      stop_after_goals_s=stop_after_goals_s, realtime_rate=realtime_rate,
+                      observers=observers, observe_period_s=observe_period_s)  # fmt: skip
+    return collect_logs(run, stop_reason=why)
 
 
 def _progress_bar(total: float, enabled: bool):

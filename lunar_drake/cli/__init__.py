@@ -1,4 +1,5 @@
-"""The ``lunar-drake`` command: one module per subcommand (``run``, ``scenarios``,
+"""The ``lunar-drake`` command: one module per subcommand (``run``, ``serve``,
+``export-mcap``, ``scenarios``,
 ``terrain synth``, ``plan``, ``world build``, ``render``, ``trade``, ``slip-study``,
 ``vo-study``,
 ``slip-fit``, ``ephemeris``, ``lightmap``), each with ``add_parser(sub)`` and
@@ -15,8 +16,8 @@ import sys
 from lunar_drake.errors import LunarDrakeError
 
 #: The subcommand modules, in the order ``lunar-drake --help`` lists them.
-COMMANDS = ("run", "scenarios", "plan", "render", "terrain", "world", "trade", "slip_study",
-            "vo_study", "slip_fit", "ephemeris", "lightmap")  # fmt: skip
+COMMANDS = ("run", "serve", "export_mcap", "scenarios", "plan", "render", "terrain", "world",
+            "trade", "slip_study", "vo_study", "slip_fit", "ephemeris", "lightmap")  # fmt: skip
 
 DESCRIPTION = """\
 lunar_drake: a Lunar rover mission simulator on Drake (synthetic polar terrain, a

@@ -180,15 +180,67 @@ def calibration_line(scenario) -> str | None:
 
 
 def command(args) -> int:
-    from lunar_drake import metrics, outputs
-    from lunar_drake.files import check_replaceable, staged_directory
-    from lunar_drake.science.world import needs_world, run_world
-    from lunar_drake.simulation import simulate
-    from lunar_drake.site import load_site
+    from lunar_drake import outputs
+    from lunar_drake.files import check_replaceable
 
     scenario, name = resolve_run_scenario(args)
     out = Path(args.out) if args.out else Path("runs") / (scenario.name or name)
     check_replaceable(out, allowed=outputs.RUN_DIR_NAMES, what="run directory")
+    rate = check_rate(args.rate, serve=args.serve)
+    server = observer = None
+    if args.serve:
+        from lunar_drake.mission_control.live import LiveObserver
+        from lunar_drake.mission_control.process import ServerProcess
+
+        check_port(args.port)
+        server = ServerProcess(host=args.host or "127.0.0.1", port=args.port,
+                               allow_remote=args.host is not None)  # fmt: skip
+        observer = LiveObserver(outbox=server.outbox, inbox=server.inbox)
+        print(f"Mission control: {server.url} (the run is paced to {rate:g}x real time; "
+              "the page's End button ends it early and writes it)", flush=True)  # fmt: skip
+    try:
+        return _run(args, scenario=scenario, name=name, out=out, rate=rate, server=server,
+                    observer=observer)  # fmt: skip
+    finally:
+        if server is not None:
+            server.close()
+
+
+def check_rate(rate: float | None, *, serve: bool) -> float | None:
+    """``--rate``: None (as fast as possible; 1 with ``--serve``) or a finite rate >= 0."""
+    if rate is None:
+        return 1.0 if serve else None
+    if not (math.isfinite(rate) and rate >= 0.0):
+        raise ConfigError(f"--rate {rate!r} must be >= 0 (x real time; 0: as fast as possible)")
+    return float(rate)
+
+
+def check_port(port: int) -> int:
+    """``--port``: 0 (any free port) to 65535."""
+    if not 0 <= port <= 65535:
+        raise ConfigError(f"--port {port} must be in [0, 65535]")
+    return port
+
+
+def with_actions(scenario, actions: list):
+    """``scenario`` with ``actions`` (commands sent live) appended to
+    ``ground.actions``, so the run's ``scenario.yaml`` reproduces them."""
+    import copy
+
+    if not actions:
+        return scenario
+    out = copy.deepcopy(scenario)
+    out.ground.actions = [*out.ground.actions, *actions]
+    return out
+
+
+def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int:
+    from lunar_drake import metrics, outputs
+    from lunar_drake.files import staged_directory
+    from lunar_drake.science.world import needs_world, run_world
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
     print(describe_estimate(scenario, meshcat=not args.no_meshcat, out=out), flush=True)
     for line in (map_line(scenario), calibration_line(scenario)):
         if line:
@@ -220,7 +272,12 @@ def command(args) -> int:
             meshcat=meshcat,
             progress=not args.no_progress,
             frames_dir=tmp / "frames" if scenario.logging.save_frames else None,
+            realtime_rate=rate,
+            observers=(observer,) if observer is not None else (),
+            observe_period_s=0.5 / scenario.ground.rate_hz,
         )
+        if observer is not None:
+            scenario = with_actions(scenario, observer.actions)
         summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
         timing = {
             "site_s": t_site,
@@ -239,15 +296,19 @@ def command(args) -> int:
         )
     _report(summary, timing=timing, t_site=t_site, scenario=scenario, out=out,
             meshcat=meshcat)  # fmt: skip
+    if observer is not None:
+        observer.finish(stop_reason=summary["stop_reason"])
+        print(f"Mission control: {server.url} (the finished run)"
+              + ("" if args.wait else "; closing (--wait keeps it open)"), flush=True)
     if meshcat is not None:
         print(f"Meshcat: {meshcat.web_url()} (static replay: {out / 'meshcat.html'})")
-        if args.wait:
-            print("Serving Meshcat; press Ctrl-C to stop.", flush=True)
-            try:
-                while True:
-                    time.sleep(1.0)
-            except KeyboardInterrupt:
-                pass
+    if args.wait and (meshcat is not None or server is not None):
+        print("Serving; press Ctrl-C to stop.", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
     return 0
 
 
@@ -384,6 +445,18 @@ def add_parser(sub) -> None:
     r.add_argument("--soil", default=None,
                    help="soil preset (lunar_regolith, grc1, jsc1a) or a soil YAML file "
                         "(default: the scenario's soil)")  # fmt: skip
-    r.add_argument("--wait", action="store_true", help="keep serving Meshcat after the run")
+    r.add_argument("--wait", action="store_true",
+                   help="keep serving Meshcat (and mission control) after the run")  # fmt: skip
+    r.add_argument("--serve", action="store_true",
+                   help="live mission: serve the mission-control page (Open MCT) while the "
+                        "run goes, paced to --rate, and take commands from it")  # fmt: skip
+    r.add_argument("--port", type=int, default=8080,
+                   help="mission control's port (default 8080; 0: any free port)")
+    r.add_argument("--host", default=None,
+                   help="interface mission control listens on (default 127.0.0.1; giving "
+                        "another opens it to the network)")  # fmt: skip
+    r.add_argument("--rate", type=float, default=None,
+                   help="pace the run to this multiple of real time (default: 1 with "
+                        "--serve, else as fast as it can; 0: as fast as it can)")  # fmt: skip
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
     r.set_defaults(func=command)

@@ -84,6 +84,16 @@ class Ledger:
         out.reverse()
         return out
 
+    def since(self, n: int) -> list:
+        """The items after the first ``n`` (oldest first), in O(len - n)."""
+        out = []
+        node = self
+        while node._len > max(int(n), 0):
+            out.append(node._item)
+            node = node._prev
+        out.reverse()
+        return out
+
     def __copy__(self):
         return self
 

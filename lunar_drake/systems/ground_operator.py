@@ -114,6 +114,11 @@ class GroundOperator(LeafSystem):
             prerequisites_of_calc={self.time_ticket(), self.all_state_ticket()},
         )
 
+    @property
+    def params(self) -> OperatorParams:
+        """The ground's settings."""
+        return self._params
+
     # ----------------------------------------------------------------- the operator API
 
     def operator_state(self, context) -> OperatorState:

@@ -41,6 +41,14 @@ class TopicReceiver(LeafSystem):
         """Every delivery handled so far (oldest first), in this system's context."""
         return context.get_abstract_state(self._ledger).get_value()[1].items()
 
+    def received_since(self, context, n: int) -> list:
+        """The deliveries after the first ``n`` (oldest first; a live display's news)."""
+        return context.get_abstract_state(self._ledger).get_value()[1].since(n)
+
+    def received_count(self, context) -> int:
+        """How many deliveries were handled so far."""
+        return len(context.get_abstract_state(self._ledger).get_value()[1])
+
     def _update(self, context, state):
         last, ledger = context.get_abstract_state(self._ledger).get_value()
         new = [d for d in self.inbox_input.Eval(context) if d.message.seq > last]

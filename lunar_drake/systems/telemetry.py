@@ -109,6 +109,10 @@ class TelemetryReceiver(LeafSystem):
         """Every delivery handled so far (oldest first), in this system's context."""
         return context.get_abstract_state(self._ledger).get_value().items()
 
+    def received_since(self, context, n: int) -> list:
+        """The deliveries after the first ``n`` (oldest first; a live display's news)."""
+        return context.get_abstract_state(self._ledger).get_value().since(n)
+
     def _update(self, context, state):
         latest = context.get_discrete_state(self._latest).get_value()
         last = latest[0]

@@ -1,0 +1,182 @@
+"""The telemetry dictionary: every point mission control shows, and the conversion of
+what the ground received into datums ``(key, t_s, value)``.
+
+Times are simulation seconds of reception on the ground; displays show them as UTC
+(``site.epoch_utc`` + t). Nothing here reads truth.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+
+from lunar_drake.autonomy.commands import MODES, SAFE_REASONS
+from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
+
+
+@dc.dataclass(frozen=True)
+class Point:
+    """One telemetry point: ``key`` (dotted), display ``name``, ``units``, ``format``
+    (``float``, ``int``, ``enum`` with ``enum`` names by index, or ``string``) and the
+    ``group`` it is listed under."""
+
+    key: str
+    name: str
+    units: str = ""
+    format: str = "float"
+    enum: tuple = ()
+    group: str = "rover"
+
+    def to_json(self) -> dict:
+        d = {"key": self.key, "name": self.name, "units": self.units,
+             "format": self.format, "group": self.group}  # fmt: skip
+        if self.enum:
+            d["enum"] = list(self.enum)
+        return d
+
+
+#: Cautions and warnings (the ``cw.*`` points): 0 nominal, 1 active.
+CAUTIONS = {
+    "cw.safed": "Rover safed",
+    "cw.uplink_loss": "Uplink loss (safed on board)",
+    "cw.loss_of_signal": "No telemetry for 3 periods (LOS: Earth below the horizon or link)",
+    "cw.low_soc": "Low state of charge",
+}
+
+POINTS: tuple[Point, ...] = (
+    Point("mission.time", "Mission elapsed time (the displays' clock)", "s", group="mission"),
+    Point("rover.x", "Estimated x (on board)", "m"),
+    Point("rover.y", "Estimated y (on board)", "m"),
+    Point("rover.z", "Estimated height change (on board)", "m"),
+    Point("rover.roll", "Roll (on board)", "deg"),
+    Point("rover.pitch", "Pitch (on board)", "deg"),
+    Point("rover.yaw", "Heading (on board)", "deg"),
+    Point("rover.speed", "Speed (from the downlinked estimates)", "m/s"),
+    Point("rover.slip", "Estimated slip (1 - speed / commanded)", "%"),
+    Point("rover.cmd_vx", "Commanded speed", "m/s"),
+    Point("rover.cmd_wz", "Commanded turn rate", "deg/s"),
+    Point("rover.brake", "Brakes", "", "enum", ("released", "applied")),
+    Point("rover.mode", "Mode", "", "enum", MODES),
+    Point("rover.safe_reason", "Safe reason", "", "enum", ("none", *SAFE_REASONS[1:])),
+    Point("rover.command_seq", "Newest command handled", "", "int"),
+    Point("rover.motion_seq", "Newest drive command accepted", "", "int"),
+    Point("rover.mode_changes", "Mode changes on board", "", "int"),
+    Point("rover.soc", "Battery state of charge", "%"),
+    Point("rover.array_power", "Solar array power", "W"),
+    Point("link.delay", "Telemetry latency (sent to received)", "s", group="link"),
+    Point("link.lost", "Telemetry packets lost (seq gaps)", "", "int", group="link"),
+    Point("link.received", "Telemetry packets received", "", "int", group="link"),
+    Point("ground.x", "Ground estimate x (with VO)", "m", group="ground"),
+    Point("ground.y", "Ground estimate y (with VO)", "m", group="ground"),
+    Point("ground.yaw", "Ground estimate heading", "deg", group="ground"),
+    Point("ground.goals_reached", "Goals reached (ground's judgement)", "", "int", group="ground"),
+    Point("ground.goals", "Goals given", "", "int", group="ground"),
+    Point("ground.event", "Ground event", "", "string", group="ground"),
+    Point("nss.weh", "NSS water-equivalent hydrogen (ground estimate)", "wt%", group="science"),
+    Point("nss.epithermal", "NSS epithermal counts", "counts", group="science"),
+    Point("nss.thermal", "NSS thermal counts", "counts", group="science"),
+    *(Point(k, n, "", "enum", ("nominal", "ACTIVE"), group="cw") for k, n in CAUTIONS.items()),
+)
+
+BY_KEY = {p.key: p for p in POINTS}
+_F = {name: k for k, name in enumerate(TELEMETRY_FIELDS)}
+
+
+@dc.dataclass
+class Converter:
+    """Turns telemetry packets into datums, packet after packet (it remembers the one
+    before for speed, slip and lost packets).
+
+    Attributes: ``telemetry_period_s`` (the rover's telemetry period: three without a
+    packet raise ``cw.loss_of_signal``), ``min_soc`` (the low-SOC caution, 0-1).
+    """
+
+    telemetry_period_s: float = 1.0
+    min_soc: float = 0.2
+    prev: tuple | None = None  # (seq, t_sent, x, y, vx_cmd)
+    lost: int = 0
+    received: int = 0
+    los: bool = False
+
+    def packet(self, *, seq: int, t_sent: float, t_received: float, packet) -> list:
+        """The datums of one received packet, all stamped ``t_received`` (s)."""
+        p = np.asarray(packet, np.float64)
+        t = float(t_received)
+        deg = math.degrees
+        out = [
+            ("rover.x", t, float(p[_F["x_m"]])),
+            ("rover.y", t, float(p[_F["y_m"]])),
+            ("rover.z", t, float(p[_F["z_rel_m"]])),
+            ("rover.roll", t, deg(p[_F["roll_rad"]])),
+            ("rover.pitch", t, deg(p[_F["pitch_rad"]])),
+            ("rover.yaw", t, deg(p[_F["yaw_rad"]])),
+            ("rover.cmd_vx", t, float(p[_F["vx_cmd_mps"]])),
+            ("rover.cmd_wz", t, deg(p[_F["wz_cmd_radps"]])),
+            ("rover.brake", t, int(p[_F["brake"]] > 0.5)),
+            ("rover.mode", t, int(p[_F["mode"]])),
+            ("rover.safe_reason", t, int(p[_F["safe_reason"]])),
+            ("rover.command_seq", t, int(p[_F["command_seq"]])),
+            ("rover.motion_seq", t, int(p[_F["motion_seq"]])),
+            ("rover.mode_changes", t, int(p[_F["mode_changes"]])),
+            ("link.delay", t, float(t_received - t_sent)),
+        ]
+        soc, array = float(p[_F["soc"]]), float(p[_F["array_W"]])
+        if math.isfinite(soc):
+            out.append(("rover.soc", t, 100.0 * soc))
+            out.append(("cw.low_soc", t, int(soc < self.min_soc)))
+        if math.isfinite(array):
+            out.append(("rover.array_power", t, array))
+        x, y, vx = float(p[_F["x_m"]]), float(p[_F["y_m"]]), float(p[_F["vx_cmd_mps"]])
+        if self.prev is not None:
+            pseq, pt, px, py, pvx = self.prev
+            self.lost += max(0, int(seq) - pseq - 1)
+            dt = float(t_sent) - pt
+            if dt > 0 and int(seq) == pseq + 1:
+                speed = math.hypot(x - px, y - py) / dt
+                out.append(("rover.speed", t, speed))
+                if abs(pvx) > 0.01 and abs(vx) > 0.01:
+                    out.append(("rover.slip", t, 100.0 * (1.0 - speed / abs(pvx))))
+        self.prev = (int(seq), float(t_sent), x, y, vx)
+        self.received += 1
+        out.append(("link.lost", t, self.lost))
+        out.append(("link.received", t, self.received))
+        mode = MODES[int(p[_F["mode"]])] if 0 <= int(p[_F["mode"]]) < len(MODES) else ""
+        reason = int(p[_F["safe_reason"]])
+        out.append(("cw.safed", t, int(mode == "safed")))
+        out.append(("cw.uplink_loss", t, int(mode == "safed" and 0 <= reason < len(SAFE_REASONS)
+                                             and SAFE_REASONS[reason] == "uplink_loss")))
+        if self.los:
+            self.los = False
+            out.append(("cw.loss_of_signal", t, 0))
+        return out
+
+    def tick(self, *, now_s: float, last_received_s: float | None) -> list:
+        """``cw.loss_of_signal`` when no packet came for three telemetry periods."""
+        if self.los or last_received_s is None:
+            return []
+        if now_s - last_received_s > 3.0 * self.telemetry_period_s:
+            self.los = True
+            return [("cw.loss_of_signal", float(now_s), 1)]
+        return []
+
+
+def ground_pose_datums(t_s: float, pose) -> list:
+    """Datums of the ground's pose estimate (x, y, z, roll, pitch, yaw; m, rad) at ``t_s``."""
+    t = float(t_s)
+    return [("ground.x", t, float(pose[0])), ("ground.y", t, float(pose[1])),
+            ("ground.yaw", t, math.degrees(float(pose[5])))]  # fmt: skip
+
+
+def event_datum(event) -> tuple:
+    """The ``ground.event`` datum of a ground :class:`~lunar_drake.autonomy.operations.Event`."""
+    text = event.kind + (f": {event.detail}" if event.detail else "")
+    return ("ground.event", float(event.t_s), text)
+
+
+def goal_datums(t_s: float, status) -> list:
+    """``ground.goals`` and ``ground.goals_reached`` from the goals' status tuple."""
+    t = float(t_s)
+    return [("ground.goals", t, len(status)),
+            ("ground.goals_reached", t, sum(s == "reached" for s in status))]  # fmt: skip

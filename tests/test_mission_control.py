@@ -1,0 +1,310 @@
+"""Mission control: the telemetry dictionary and store, commands, the aiohttp server
+(history, realtime WebSocket, bad requests, vanishing clients, binding), the live
+observer in a real mission (a command from the network is driven and ``scenario.yaml``
+reproduces it) and ``run.mcap``."""
+
+import asyncio
+import json
+import math
+import queue
+
+import numpy as np
+import pytest
+
+from lunar_drake.autonomy.commands import MODES, SAFE_REASONS
+from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
+from lunar_drake.mission_control import dictionary as dic
+from lunar_drake.mission_control.commands import CommandError, as_action, parse_command
+from lunar_drake.mission_control.server import BindError, MissionControl, check_host, make_app
+from lunar_drake.mission_control.store import TelemetryStore, UnknownPointError
+
+
+def _packet(**kw):
+    p = np.zeros(len(TELEMETRY_FIELDS))
+    p[TELEMETRY_FIELDS.index("soc")] = math.nan
+    p[TELEMETRY_FIELDS.index("array_W")] = math.nan
+    for k, v in kw.items():
+        p[TELEMETRY_FIELDS.index(k)] = v
+    return p
+
+
+# ------------------------------------------------------------------ dictionary, store
+
+
+def _items(conv, **kw):
+    return [(k, v) for k, _, v in conv.packet(**kw)]
+
+
+def test_converter_derives_speed_slip_losses_and_cautions_from_received_packets():
+    conv = dic.Converter(telemetry_period_s=1.0, min_soc=0.2)
+    a = dict(_items(conv, seq=0, t_sent=10.0, t_received=11.3,
+                               packet=_packet(x_m=1.0, vx_cmd_mps=0.2, soc=0.5)))  # fmt: skip
+    assert a["link.delay"] == pytest.approx(1.3)
+    assert a["rover.soc"] == pytest.approx(50.0) and a["cw.low_soc"] == 0
+    assert "rover.speed" not in a  # no packet before it
+    # seq 1 lost; seq 2 two seconds later, 0.3 m on: no speed across a gap
+    b = dict(_items(conv, seq=2, t_sent=12.0, t_received=13.3,
+                               packet=_packet(x_m=1.3, vx_cmd_mps=0.2, soc=0.1)))  # fmt: skip
+    assert b["link.lost"] == 1 and "rover.speed" not in b and b["cw.low_soc"] == 1
+    # seq 3 one second later, 0.15 m on at 0.2 m/s commanded: 25 % slip
+    c = dict(_items(conv, seq=3, t_sent=13.0, t_received=14.3,
+                               packet=_packet(x_m=1.45, vx_cmd_mps=0.2,
+                                              mode=MODES.index("safed"),
+                                              safe_reason=SAFE_REASONS.index("uplink_loss"))))
+    assert c["rover.speed"] == pytest.approx(0.15) and c["rover.slip"] == pytest.approx(25.0)
+    assert c["cw.safed"] == 1 and c["cw.uplink_loss"] == 1 and c["link.received"] == 3
+    assert conv.tick(now_s=16.0, last_received_s=14.3) == []  # 1.7 s: fine
+    assert conv.tick(now_s=17.5, last_received_s=14.3) == [("cw.loss_of_signal", 17.5, 1)]
+    assert conv.tick(now_s=18.0, last_received_s=14.3) == []  # raised once
+    d = dict(_items(conv, seq=4, t_sent=17.0, t_received=18.3, packet=_packet(x_m=1.45)))
+    assert d["cw.loss_of_signal"] == 0
+
+
+def test_every_datum_has_a_dictionary_point_and_units():
+    conv = dic.Converter()
+    keys = {k for k, _, _ in conv.packet(seq=0, t_sent=0.0, t_received=1.0,
+                                         packet=_packet(soc=0.9, array_W=100.0))}  # fmt: skip
+    keys |= {k for k, _, _ in conv.packet(seq=1, t_sent=1.0, t_received=2.0,
+                                          packet=_packet(x_m=0.2, vx_cmd_mps=0.2))}  # fmt: skip
+    keys |= {k for k, _, _ in dic.ground_pose_datums(1.0, [0, 0, 0, 0, 0, 0.1])}
+    assert keys <= set(dic.BY_KEY)
+    assert all(p.units or p.format in ("enum", "int", "string") for p in dic.POINTS)
+
+
+def test_store_history_is_inclusive_ordered_and_refuses_unknown_keys():
+    s = TelemetryStore()
+    got = []
+    s.listeners.append(got.extend)
+    s.add([("rover.x", 2.0, 2.0), ("rover.x", 1.0, 1.0), ("rover.x", 3.0, 3.0),
+           ("no.such", 1.0, 0.0), ("rover.y", 1.0, math.nan)])  # fmt: skip
+    assert s.history("rover.x") == [(1.0, 1.0), (2.0, 2.0), (3.0, 3.0)]
+    assert s.history("rover.x", start_s=2.0, end_s=3.0) == [(2.0, 2.0), (3.0, 3.0)]
+    assert s.history("rover.y") == [] and len(got) == 3  # the unknown key and NaN dropped
+    with pytest.raises(UnknownPointError, match=r"no\.such"):
+        s.history("no.such")
+
+
+def test_commands_are_checked_with_one_line_each():
+    assert parse_command({"action": "goal", "x_m": 1, "y_m": 2.5}) == {
+        "action": "goal", "x_m": 1.0, "y_m": 2.5}  # fmt: skip
+    assert parse_command({"action": "point_mast"}) == {"action": "point_mast"}
+    for bad, msg in [
+        ([1, 2], "JSON object"),
+        ({"action": "fly"}, "'fly' is unknown"),
+        ({"action": "goal", "x_m": 1}, "'y_m' is required"),
+        ({"action": "goal", "x_m": "a", "y_m": 0}, "must be a number"),
+        ({"action": "goal", "x_m": 1, "y_m": 0, "z": 1}, "unknown argument 'z'"),
+        ({"action": "drive_arc", "speed_mps": 3, "distance_m": 1}, r"in \[-1, 1\]"),
+        ({"action": "point_mast", "pan_deg": 10}, "both"),
+        ({"action": "drill", "depth_m": float("nan")}, "finite"),
+    ]:
+        with pytest.raises(CommandError, match=msg) as err:
+            parse_command(bad)
+        assert "\n" not in str(err.value)
+    a = as_action({"action": "point_mast"}, t_s=3.0)
+    assert a.action == "point_mast" and a.auto and a.t_s == 3.0
+
+
+def test_the_server_binds_loopback_unless_asked():
+    assert check_host("127.0.0.1", allow_remote=False) == "127.0.0.1"
+    assert check_host("::1", allow_remote=False) == "::1"
+    with pytest.raises(BindError, match=r"0\.0\.0\.0"):
+        check_host("0.0.0.0", allow_remote=False)
+    assert check_host("0.0.0.0", allow_remote=True) == "0.0.0.0"
+
+
+# ------------------------------------------------------------------------- the server
+
+
+def _with_client(mc, body):
+    from aiohttp.test_utils import TestClient, TestServer
+
+    async def main():
+        client = TestClient(TestServer(make_app(mc)))
+        await client.start_server()
+        try:
+            await body(client)
+        finally:
+            await client.close()
+
+    asyncio.run(main())
+
+
+def _replay_mc():
+    mc = MissionControl()
+    mc.set_site({"kind": "site", "epoch_utc": "2027-11-15T00:00:00", "name": "t",
+                 "extent_m": [-10, 10, -10, 10], "hillshade_png": b"\x89PNG"})  # fmt: skip
+    mc.store.add([("rover.x", 1.0, 0.5), ("rover.x", 2.0, 0.7), ("rover.mode", 2.0, 1)])
+    return mc
+
+
+def test_history_dictionary_and_json_errors():
+    mc = _replay_mc()
+    t0 = mc.epoch_ms
+
+    async def body(c):
+        d = await (await c.get("/api/dictionary")).json()
+        assert {p["key"] for p in d["points"]} == set(dic.BY_KEY)
+        r = await c.get(f"/api/history/rover.x?start={t0 + 1500}&end={t0 + 2000}")
+        assert await r.json() == [{"id": "rover.x", "timestamp": t0 + 2000.0, "value": 0.7}]
+        r = await c.get("/api/history/rover.x?strategy=latest")
+        assert [d["value"] for d in await r.json()] == [0.7]
+        r = await c.get("/api/history/rover.nope")
+        assert r.status == 404 and "rover.nope" in (await r.json())["error"]
+        r = await c.get("/api/history/rover.x?start=yesterday")
+        assert r.status == 400 and "start" in (await r.json())["error"]
+        r = await c.post("/api/command", data="{not json")
+        assert r.status == 400 and "not valid JSON" in (await r.json())["error"]
+        r = await c.post("/api/command", json={"action": "stop"})
+        assert r.status == 409 and "replay" in (await r.json())["error"]
+        r = await c.post("/api/command", json={"action": "warp"})
+        assert r.status == 400
+        assert (await c.get("/api/map/hillshade.png")).status == 200
+        assert (await c.get("/api/camera/latest.png")).status == 404
+        info = await (await c.get("/api/info")).json()
+        assert info["state"] == "replay" and info["epoch_ms"] == t0
+
+    _with_client(mc, body)
+
+
+def test_realtime_subscribers_get_their_points_and_bad_messages_leave_the_socket_open():
+    mc = _replay_mc()
+
+    async def body(c):
+        ws = await c.ws_connect("/api/realtime")
+        await ws.send_str("{oops")
+        assert "error" in json.loads((await ws.receive()).data)
+        await ws.send_str(json.dumps({"subscribe": ["rover.nope"]}))
+        assert "rover.nope" in json.loads((await ws.receive()).data)["error"]
+        await ws.send_str(json.dumps({"subscribe": ["rover.y"]}))
+        quitter = await c.ws_connect("/api/realtime")
+        await quitter.send_str(json.dumps({"subscribe": ["rover.y"]}))
+        await asyncio.sleep(0.05)
+        await quitter.close()  # a client that vanishes mid-stream
+        mc.ingest({"kind": "batch", "t_s": 3.0, "datums": [("rover.x", 3.0, 1.0),
+                                                            ("rover.y", 3.0, 2.0)]})
+        got = []
+        while len(got) < 2:
+            got.append(json.loads((await ws.receive()).data))
+        datums = next(m for m in got if "datums" in m)["datums"]
+        assert datums == [{"id": "rover.y", "timestamp": mc.ms(3.0), "value": 2.0}]
+        assert any("clock" in m for m in got)
+        await ws.close()
+
+    _with_client(mc, body)
+
+
+# ------------------------------------------------------------------ a live mission
+
+
+def _live_scenario(cache):
+    from lunar_drake.scenario_files import load_scenario
+
+    return load_scenario(scenario_name="goto", scenario_text=(
+        "{simulation_duration: 12.0, sensors: {camera: {enabled: false}}, "
+        "ground: {goals: []}}"))  # fmt: skip
+
+
+class _Scripted:
+    """Sends requests to the observer's inbox at set simulation times."""
+
+    def __init__(self, inbox, script):
+        self.inbox, self.script = inbox, list(script)
+
+    def __call__(self, run):
+        while self.script and run.time_s >= self.script[0][0] - 1e-9:
+            self.inbox.put(self.script.pop(0)[1])
+
+
+def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_run(cache):
+    from lunar_drake import metrics
+    from lunar_drake.cli.run import with_actions
+    from lunar_drake.mission_control.live import LiveObserver
+    from lunar_drake.simulation import simulate
+    from lunar_drake.site import load_site
+
+    scenario = _live_scenario(cache)
+    site = load_site(scenario, progress=False)
+    outbox, inbox = queue.Queue(), queue.Queue()
+    obs = LiveObserver(outbox=outbox, inbox=inbox)
+    script = _Scripted(inbox, [
+        (1.0, {"id": 1, "op": "preview", "x_m": 3.0, "y_m": 0.0}),
+        (1.0, {"id": 2, "op": "command", "command": {"action": "goal", "x_m": 3.0, "y_m": 0.0}}),
+        (1.5, {"id": 3, "op": "command", "command": {"action": "goal", "x_m": 1e4, "y_m": 0.0}}),
+    ])  # fmt: skip
+    logs = simulate(scenario=scenario, site=site, observers=(script, obs),
+                    observe_period_s=0.05)  # fmt: skip
+    msgs = []
+    while not outbox.empty():
+        msgs.append(outbox.get())
+    assert msgs[0]["kind"] == "site" and msgs[0]["hillshade_png"][:4] == b"\x89PNG"
+    replies = {m["id"]: m for m in msgs if m["kind"] == "reply"}
+    assert replies[1]["ok"] and len(replies[1]["path"]) >= 2
+    assert replies[1]["path"][-1] == pytest.approx([3.0, 0.0])
+    assert replies[2]["ok"] and replies[2]["t_s"] == pytest.approx(1.0)
+    assert not replies[3]["ok"] and "off the ground's map" in replies[3]["error"]
+    assert [a.action for a in obs.actions] == ["goal"]
+    # the goal went up the link and the rover moved towards it
+    assert logs.ground_goals and logs.ground_goals[0][0] == (3.0, 0.0)
+    truth = logs.vectors["truth.pose"]
+    assert truth.data[-1, 0] - truth.data[0, 0] > 0.5
+    keys = {d[0] for m in msgs if m["kind"] == "batch" for d in m["datums"]}
+    assert {"rover.x", "link.delay", "ground.x", "ground.event", "mission.time"} <= keys
+    assert any("plan" in m and m["plan"]["path"] for m in msgs if m["kind"] == "batch")
+    # the same scenario with the command written down as ground.actions: same run
+    again = with_actions(scenario, obs.actions)
+    logs2 = simulate(scenario=again, site=site)
+    s1 = metrics.summarize(scenario=again, site=site, logs=logs)
+    s2 = metrics.summarize(scenario=again, site=site, logs=logs2)
+    assert json.dumps(s1, sort_keys=True) == json.dumps(s2, sort_keys=True)
+    np.testing.assert_array_equal(logs.vectors["truth.pose"].data,
+                                  logs2.vectors["truth.pose"].data)  # fmt: skip
+
+
+# ---------------------------------------------------------------------------- run.mcap
+
+
+def test_run_mcap_holds_the_expected_channels_and_counts(cache, tmp_path):
+    import csv
+
+    from mcap.reader import make_reader
+
+    from lunar_drake.cli import main
+    from lunar_drake.mission_control.recording import write_run_mcap
+
+    out = tmp_path / "run"
+    assert main(["run", "--scenario", "goto", "--duration", "12", "--no-meshcat",
+                 "--no-progress", "--out", str(out)]) == 0  # fmt: skip
+
+    def rows(name):
+        with open(out / name, newline="") as f:
+            return list(csv.DictReader(f))
+
+    with open(out / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        topics = {c.id: c.topic for c in summary.channels.values()}
+        counts = {topics[k]: n for k, n in summary.statistics.channel_message_counts.items()}
+        schemas = {topics[c.id]: summary.schemas[c.schema_id].name if c.schema_id else ""
+                   for c in summary.channels.values()}  # fmt: skip
+        times = [m.log_time for _, _, m in reader.iter_messages()]
+    tel = rows("telemetry.csv")
+    assert counts["/rover/pose_estimate"] == counts["/telemetry"] == len(tel) > 5
+    assert counts["/ground/events"] == len(rows("ground_events.csv")) > 0
+    assert counts["/camera/left/compressed"] == len(rows("images.csv")) > 0
+    assert counts["/ground/pose"] == counts["/tf"] > 0
+    assert counts["/ground/costmap"] == 1 and counts["/ground/keyframes"] == 1
+    assert schemas["/rover/pose_estimate"] == "foxglove.PoseInFrame"
+    assert schemas["/camera/left/compressed"] == "foxglove.CompressedImage"
+    assert schemas["/ground/costmap"] == "foxglove.Grid"
+    assert times == sorted(times)
+    # stamped with reception time: the first packet's, from the epoch of the scenario
+    from lunar_drake.mission_control.server import epoch_ms
+
+    first = float(tel[0]["t_received_s"])
+    assert min(times) <= round(epoch_ms("2027-11-15T00:00:00") * 1e6 + first * 1e9)
+    # exporting again gives the same bytes (no wall clock inside)
+    again = write_run_mcap(out, out=tmp_path / "again.mcap", costmap=None)
+    assert again.stat().st_size > 0
+    third = write_run_mcap(out, out=tmp_path / "third.mcap", costmap=None)
+    assert again.read_bytes() == third.read_bytes()
