@@ -205,6 +205,26 @@ def _live_scenario(cache):
         "ground: {goals: []}}"))  # fmt: skip
 
 
+class _FakeMeshcat:
+    """Drake's Meshcat control API, with clicks at set simulation times."""
+
+    def __init__(self, click_at_s):
+        self.click_at_s, self.buttons, self.sliders = click_at_s, {}, {}
+
+    def AddButton(self, name):
+        self.buttons[name] = 0
+
+    def AddSlider(self, name, lo, hi, step, value):
+        self.sliders[name] = -0.1 if "speed" in name else value
+
+    def GetSliderValue(self, name):
+        return self.sliders[name]
+
+    def GetButtonClicks(self, name):
+        t = self.click_at_s.get(name)
+        return int(t is not None and self.run() >= t - 1e-9)
+
+
 class _Scripted:
     """Sends requests to the observer's inbox at set simulation times."""
 
@@ -220,6 +240,7 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     from lunar_drake import metrics
     from lunar_drake.cli.run import with_actions
     from lunar_drake.mission_control.live import LiveObserver
+    from lunar_drake.mission_control.meshcat_controls import MeshcatControls
     from lunar_drake.simulation import simulate
     from lunar_drake.site import load_site
 
@@ -232,8 +253,19 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
         (1.0, {"id": 2, "op": "command", "command": {"action": "goal", "x_m": 3.0, "y_m": 0.0}}),
         (1.5, {"id": 3, "op": "command", "command": {"action": "goal", "x_m": 1e4, "y_m": 0.0}}),
     ])  # fmt: skip
-    logs = simulate(scenario=scenario, site=site, observers=(script, obs),
+    meshcat = _FakeMeshcat(click_at_s={"Drive arc (2 m)": 8.0})
+    controls = MeshcatControls(meshcat, echo=lambda *_: None)
+    meshcat.run = lambda: run_time[0]
+    run_time = [0.0]
+
+    def clock(run):
+        run_time[0] = run.time_s
+
+    logs = simulate(scenario=scenario, site=site, observers=(script, obs, clock, controls),
                     observe_period_s=0.05)  # fmt: skip
+    assert [(a.action, a.speed_mps, a.distance_m) for a in controls.actions] == [
+        ("drive_arc", -0.1, 2.0)]  # fmt: skip
+    assert controls.actions[0].t_s == pytest.approx(8.0, abs=0.06)
     msgs = []
     while not outbox.empty():
         msgs.append(outbox.get())
@@ -252,7 +284,8 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     assert {"rover.x", "link.delay", "ground.x", "ground.event", "mission.time"} <= keys
     assert any("plan" in m and m["plan"]["path"] for m in msgs if m["kind"] == "batch")
     # the same scenario with the command written down as ground.actions: same run
-    again = with_actions(scenario, obs.actions)
+    again = with_actions(scenario, sorted([*obs.actions, *controls.actions],
+                                          key=lambda a: a.t_s))  # fmt: skip
     logs2 = simulate(scenario=again, site=site)
     s1 = metrics.summarize(scenario=again, site=site, logs=logs)
     s2 = metrics.summarize(scenario=again, site=site, logs=logs2)
@@ -303,8 +336,66 @@ def test_run_mcap_holds_the_expected_channels_and_counts(cache, tmp_path):
 
     first = float(tel[0]["t_received_s"])
     assert min(times) <= round(epoch_ms("2027-11-15T00:00:00") * 1e6 + first * 1e9)
+    # the same run served for replay: the datums the live mission would have published
+    from lunar_drake.mission_control.replay import load_run
+
+    mc = MissionControl()
+    load_run(mc, out)
+    assert len(mc.store.history("rover.x")) == len(tel)
+    assert mc.store.history("link.delay")[0][1] == pytest.approx(
+        float(tel[0]["t_received_s"]) - float(tel[0]["t_sent_s"]))  # fmt: skip
+    assert mc.info["state"] == "replay" and mc.hillshade_png[:4] == b"\x89PNG"
+    assert [g[:2] for g in mc.store.map.goals] == [[9.0, 0.0]]
     # exporting again gives the same bytes (no wall clock inside)
     again = write_run_mcap(out, out=tmp_path / "again.mcap", costmap=None)
     assert again.stat().st_size > 0
     third = write_run_mcap(out, out=tmp_path / "third.mcap", costmap=None)
     assert again.read_bytes() == third.read_bytes()
+
+
+def test_the_foxglove_live_server_advertises_the_live_topics():
+    from aiohttp import ClientSession
+
+    from lunar_drake.mission_control.foxglove_live import FoxgloveLive
+
+    live = FoxgloveLive(host="127.0.0.1", port=0, epoch_utc="2027-11-15T00:00:00")
+    port = live.server.port() if callable(live.server.port) else live.server.port
+    fields = dict.fromkeys(TELEMETRY_FIELDS, 0.0)
+
+    async def main():
+        async with ClientSession() as s, s.ws_connect(
+            f"ws://127.0.0.1:{port}", protocols=("foxglove.sdk.v1", "foxglove.websocket.v1")
+        ) as ws:
+            topics = set()
+            for _ in range(6):
+                msg = json.loads((await ws.receive(timeout=10)).data)
+                if msg.get("op") == "advertise":
+                    topics |= {c["topic"] for c in msg["channels"]}
+                if {"/rover/pose_estimate", "/ground/events"} <= topics:
+                    break
+            live.batch({"packets": [{"seq": 0, "t_sent_s": 1.0, "t_received_s": 2.3,
+                                     "fields": fields}],
+                        "events": [(2.3, "safed", "tilt")],
+                        "ground_pose": (2.3, [0, 0, 0, 0, 0, 0.5])})  # fmt: skip
+            return topics
+
+    topics = asyncio.run(main())
+    live.close()
+    assert {"/rover/pose_estimate", "/ground/pose", "/tf", "/telemetry", "/ground/events",
+            "/camera/left/compressed"} <= topics
+
+
+def test_bad_command_lines_get_one_line_and_exit_2(tmp_path, capsys):
+    from lunar_drake.cli import main
+
+    for argv, msg in [
+        (["run", "--scenario", "small", "--rate", "-1", "--out", str(tmp_path / "a")], "--rate"),
+        (["run", "--scenario", "small", "--serve", "--port", "70000", "--no-meshcat",
+          "--out", str(tmp_path / "b")], "--port 70000"),
+        (["serve", str(tmp_path)], "not a run directory"),
+        (["export-mcap", str(tmp_path / "nope")], "not a run directory"),
+    ]:  # fmt: skip
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert msg in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

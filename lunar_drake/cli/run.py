@@ -193,11 +193,16 @@ def command(args) -> int:
         from lunar_drake.mission_control.process import ServerProcess
 
         check_port(args.port)
+        foxglove = None if args.foxglove_port < 0 else check_port(args.foxglove_port)
         server = ServerProcess(host=args.host or "127.0.0.1", port=args.port,
-                               allow_remote=args.host is not None)  # fmt: skip
+                               allow_remote=args.host is not None,
+                               foxglove_port=foxglove)  # fmt: skip
         observer = LiveObserver(outbox=server.outbox, inbox=server.inbox)
         print(f"Mission control: {server.url} (the run is paced to {rate:g}x real time; "
               "the page's End button ends it early and writes it)", flush=True)  # fmt: skip
+        if foxglove is not None:
+            print(f"Foxglove: ws://{args.host or '127.0.0.1'}:{foxglove} once the site is "
+                  "built (Foxglove: Open connection > Foxglove WebSocket)", flush=True)
     try:
         return _run(args, scenario=scenario, name=name, out=out, rate=rate, server=server,
                     observer=observer)  # fmt: skip
@@ -255,6 +260,11 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
         f"Scenario {scenario.name or name!r} (seed {scenario.random_seed}); building the site...",
         flush=True,
     )
+    observers = [observer] if observer is not None else []
+    if observer is not None and meshcat is not None:
+        from lunar_drake.mission_control.meshcat_controls import MeshcatControls
+
+        observers.append(MeshcatControls(meshcat))
     with staged_directory(out, what="run directory") as tmp:
         t0 = time.perf_counter()
         site = load_site(scenario, progress=not args.no_progress)
@@ -273,11 +283,12 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
             progress=not args.no_progress,
             frames_dir=tmp / "frames" if scenario.logging.save_frames else None,
             realtime_rate=rate,
-            observers=(observer,) if observer is not None else (),
+            observers=tuple(observers),
             observe_period_s=0.5 / scenario.ground.rate_hz,
         )
-        if observer is not None:
-            scenario = with_actions(scenario, observer.actions)
+        if observers:
+            scenario = with_actions(scenario, sorted(
+                (a for o in observers for a in o.actions), key=lambda a: a.t_s))
         summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
         timing = {
             "site_s": t_site,
@@ -455,6 +466,9 @@ def add_parser(sub) -> None:
     r.add_argument("--host", default=None,
                    help="interface mission control listens on (default 127.0.0.1; giving "
                         "another opens it to the network)")  # fmt: skip
+    r.add_argument("--foxglove-port", type=int, default=8765,
+                   help="with --serve, the foxglove-sdk live WebSocket server's port "
+                        "(default 8765; -1: none)")  # fmt: skip
     r.add_argument("--rate", type=float, default=None,
                    help="pace the run to this multiple of real time (default: 1 with "
                         "--serve, else as fast as it can; 0: as fast as it can)")  # fmt: skip

@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
 from lunar_drake.errors import LunarDrakeError
 from lunar_drake.mission_control import dictionary as dic
 from lunar_drake.mission_control.commands import apply_command, as_action, parse_command
@@ -172,23 +173,33 @@ class LiveObserver:
         extra: dict = {}
         rx = run.ground_system("ground.telemetry")
         rctx = rx.GetMyContextFromRoot(root)
+        packets = []
         for d in rx.received_since(rctx, self._n_tel):
             m = d.message
             datums += self._conv.packet(seq=m.seq, t_sent=m.t_sent_s,
                                         t_received=d.t_received_s, packet=m.payload)  # fmt: skip
+            packets.append({"seq": int(m.seq), "t_sent_s": float(m.t_sent_s),
+                            "t_received_s": float(d.t_received_s),
+                            "fields": dict(zip(TELEMETRY_FIELDS, map(float, m.payload),
+                                               strict=True))})  # fmt: skip
             self._last_rx = d.t_received_s
             self._n_tel += 1
+        if packets:
+            extra["packets"] = packets
         datums += self._conv.tick(now_s=now, last_received_s=self._last_rx)
         ops = run.operator.operator_state(root)
-        for ev in ops.events.since(self._n_events):
-            datums.append(dic.event_datum(ev))
-            self._n_events += 1
+        events = ops.events.since(self._n_events)
+        self._n_events += len(events)
+        datums += [dic.event_datum(ev) for ev in events]
+        if events:
+            extra["events"] = [(float(ev.t_s), ev.kind, ev.detail) for ev in events]
         if now >= self._next_pose - 1e-9:
             self._next_pose = now + self.pose_period_s
             pose = run.mission.GetOutputPort("ground.pose_estimate").Eval(
                 run.mission.GetMyContextFromRoot(root)
             )
             datums += dic.ground_pose_datums(now, pose)
+            extra["ground_pose"] = (now, [float(v) for v in pose])
         goals = (ops.goals, ops.status)
         if goals != self._goals:
             self._goals = goals

@@ -12,7 +12,7 @@ from lunar_drake.errors import ConfigError
 
 
 def _server_main(outbox, inbox, ready, host: str, port: int, allow_remote: bool,
-                 replay_dir: str | None) -> None:  # fmt: skip
+                 replay_dir: str | None, foxglove_port: int | None) -> None:  # fmt: skip
     """The server process: serve until terminated."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
     from lunar_drake.mission_control.server import MissionControl, start_server
@@ -24,7 +24,7 @@ def _server_main(outbox, inbox, ready, host: str, port: int, allow_remote: bool,
             mc = MissionControl(store=None, to_sim=None)
             load_run(mc, replay_dir)
         else:
-            mc = MissionControl(to_sim=inbox)
+            mc = MissionControl(to_sim=inbox, foxglove_port=foxglove_port, host=host)
         try:
             runner = await start_server(mc, host=host, port=port, allow_remote=allow_remote)
         except ConfigError as exc:
@@ -45,11 +45,14 @@ class ServerProcess:
 
     ``outbox`` (mission -> server) and ``inbox`` (server -> mission) are the live
     mission's queues (:class:`~lunar_drake.mission_control.live.LiveObserver`); ``url``
-    where it listens. ``close()`` stops it.
+    where it listens; with ``foxglove_port`` a live mission also feeds the foxglove-sdk
+    WebSocket server there (:mod:`~lunar_drake.mission_control.foxglove_live`).
+    ``close()`` stops it.
     """
 
     def __init__(self, *, host: str = "127.0.0.1", port: int = 8080,
-                 allow_remote: bool = False, replay_dir=None):  # fmt: skip
+                 allow_remote: bool = False, replay_dir=None,
+                 foxglove_port: int | None = None):  # fmt: skip
         from lunar_drake.mission_control.server import check_host
 
         check_host(host, allow_remote=allow_remote)
@@ -61,7 +64,7 @@ class ServerProcess:
         self.process = ctx.Process(
             target=_server_main, name="lunar-drake-mission-control", daemon=True,
             args=(self.outbox, self.inbox, child, host, int(port), allow_remote,
-                  None if replay_dir is None else str(replay_dir)),
+                  None if replay_dir is None else str(replay_dir), foxglove_port),
         )  # fmt: skip
         self.process.start()
         child.close()

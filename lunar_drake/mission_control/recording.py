@@ -37,9 +37,50 @@ TOPICS = ("/rover/pose_estimate", "/ground/pose", "/tf", "/telemetry", "/ground/
           "/camera/left/compressed", "/ground/keyframes", "/ground/costmap",
           "/science/nss")  # fmt: skip
 
+def ns_since_epoch(epoch_utc: str, t_s: float) -> int:
+    """Unix nanoseconds of simulation time ``t_s`` (s after ``site.epoch_utc``)."""
+    epoch = _dt.datetime.fromisoformat(epoch_utc)
+    if epoch.tzinfo is None:
+        epoch = epoch.replace(tzinfo=_dt.timezone.utc)
+    return round(epoch.timestamp()) * 1_000_000_000 + round(float(t_s) * 1e9)
+
+
+def stamp(epoch_utc: str, t_s: float):
+    """A foxglove Timestamp of simulation time ``t_s``."""
+    from foxglove.messages import Timestamp
+
+    n = ns_since_epoch(epoch_utc, t_s)
+    return Timestamp(sec=n // 1_000_000_000, nsec=n % 1_000_000_000)
+
+
+def pose_in_frame(epoch_utc: str, t_s: float, x, y, z, roll, pitch, yaw):
+    """A foxglove PoseInFrame in the ``site`` frame (m, rad)."""
+    return pose_messages(epoch_utc, t_s, (x, y, z, roll, pitch, yaw))[0]
+
+
+def pose_messages(epoch_utc: str, t_s: float, pose6) -> tuple:
+    """(PoseInFrame in ``site``, FrameTransform ``site`` -> ``rover``) of a pose (x, y,
+    z, roll, pitch, yaw; m, rad) at simulation time ``t_s``."""
+    from foxglove.messages import FrameTransform, Pose, PoseInFrame, Vector3
+
+    x, y, z, roll, pitch, yaw = (float(v) for v in pose6)
+
+    def parts():
+        return stamp(epoch_utc, t_s), Vector3(x=x, y=y, z=z), _quat(roll, pitch, yaw)
+
+    ts, p, q = parts()
+    pif = PoseInFrame(timestamp=ts, frame_id="site", pose=Pose(position=p, orientation=q))
+    ts, p, q = parts()
+    tf = FrameTransform(timestamp=ts, parent_frame_id="site", child_frame_id="rover",
+                        translation=p, rotation=q)  # fmt: skip
+    return pif, tf
+
+
 #: JPEG quality of the stereo frames in ``run.mcap`` (the 8-bit previews the run saved).
 JPEG_QUALITY = 85
-_WARN = ("safed", "goal_failed", "no_ack", "left_safed", "charging")
+_POSE6 = ("x_m", "y_m", "z_rel_m", "roll_rad", "pitch_rad", "yaw_rad")
+#: Ground events logged as warnings.
+WARN_EVENTS = ("safed", "goal_failed", "no_ack", "left_safed", "charging")
 
 
 def _rows(path: Path) -> list[dict]:
@@ -99,7 +140,6 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
     )
     from foxglove.messages import (
         CompressedImage,
-        FrameTransform,
         Grid,
         Log,
         LogLevel,
@@ -107,8 +147,6 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
         PackedElementFieldNumericType,
         PointCloud,
         Pose,
-        PoseInFrame,
-        Timestamp,
         Vector2,
         Vector3,
     )
@@ -116,18 +154,10 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
     from lunar_drake.scenario_files import load_scenario
 
     d = check_run_dir(run_dir)
-    sc = load_scenario(filename=d / "scenario.yaml")
-    epoch = _dt.datetime.fromisoformat(sc.site.epoch_utc)
-    if epoch.tzinfo is None:
-        epoch = epoch.replace(tzinfo=_dt.timezone.utc)
-    epoch_ns = round(epoch.timestamp()) * 1_000_000_000
+    e = load_scenario(filename=d / "scenario.yaml").site.epoch_utc
 
     def ns(t_s: float) -> int:
-        return epoch_ns + round(float(t_s) * 1e9)
-
-    def stamp(t_s: float) -> Timestamp:
-        n = ns(t_s)
-        return Timestamp(sec=n // 1_000_000_000, nsec=n % 1_000_000_000)
+        return ns_since_epoch(e, t_s)
 
     path = Path(out) if out is not None else d / "run.mcap"
     tmp = path.with_name(path.name + ".partial")
@@ -144,11 +174,8 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
         telemetry = foxglove.Channel("/telemetry", message_encoding="json", context=ctx)
         for r in _rows(d / "telemetry.csv"):
             t = float(r["t_received_s"])
-            xyz = Vector3(x=float(r["x_m"]), y=float(r["y_m"]), z=float(r["z_rel_m"]))
-            pose = Pose(position=xyz,
-                        orientation=_quat(float(r["roll_rad"]), float(r["pitch_rad"]),
-                                          float(r["yaw_rad"])))  # fmt: skip
-            add(t, est, PoseInFrame(timestamp=stamp(t), frame_id="site", pose=pose))
+            pose6 = [float(r[k]) for k in _POSE6]
+            add(t, est, pose_in_frame(e, t, *pose6))
             add(t, telemetry, {k: (float(v) if v not in ("", None) else None)
                                for k, v in r.items()})  # fmt: skip
         ground = PoseInFrameChannel("/ground/pose", context=ctx)
@@ -159,26 +186,22 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
             if t - last < 0.5 - 1e-9:
                 continue
             last = t
-            p = Vector3(x=float(r["x_m"]), y=float(r["y_m"]), z=float(r["z_rel_m"]))
-            q = _quat(float(r["roll_rad"]), float(r["pitch_rad"]), float(r["yaw_rad"]))
-            add(t, ground, PoseInFrame(timestamp=stamp(t), frame_id="site",
-                                       pose=Pose(position=p, orientation=q)))  # fmt: skip
-            add(t, tf, FrameTransform(timestamp=stamp(t), parent_frame_id="site",
-                                      child_frame_id="rover", translation=p,
-                                      rotation=q))  # fmt: skip
+            pose, transform = pose_messages(e, t, [float(r[k]) for k in _POSE6])
+            add(t, ground, pose)
+            add(t, tf, transform)
         events = LogChannel("/ground/events", context=ctx)
         for r in _rows(d / "ground_events.csv"):
             t = float(r["t_s"])
-            level = LogLevel.Warning if r["event"] in _WARN else LogLevel.Info
+            level = LogLevel.Warning if r["event"] in WARN_EVENTS else LogLevel.Info
             text = r["event"] + (f": {r['detail']}" if r["detail"] else "")
-            add(t, events, Log(timestamp=stamp(t), level=level, message=text, name="ground",
+            add(t, events, Log(timestamp=stamp(e, t), level=level, message=text, name="ground",
                                file="", line=0))  # fmt: skip
         images = CompressedImageChannel("/camera/left/compressed", context=ctx)
         for r in _rows(d / "images.csv"):
             f = d / "frames" / f"left_{int(r['frame_index']):06d}_preview.png"
             if f.is_file():
                 t = float(r["t_received_s"])
-                add(t, images, CompressedImage(timestamp=stamp(t), frame_id="left_camera",
+                add(t, images, CompressedImage(timestamp=stamp(e, t), frame_id="left_camera",
                                                data=_jpeg(f), format="jpeg"))  # fmt: skip
         kf = [r for r in _rows(d / "keyframes.csv") if r.get("x_m") not in (None, "")]
         if kf:
@@ -187,7 +210,7 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
             t = float(kf[-1]["t_capture_s"])
             f32 = PackedElementFieldNumericType.Float32
             add(t, cloud, PointCloud(
-                timestamp=stamp(t), frame_id="site", pose=Pose(position=Vector3(x=0, y=0, z=0),
+                timestamp=stamp(e, t), frame_id="site", pose=Pose(position=Vector3(x=0, y=0, z=0),
                                                                orientation=_quat(0, 0, 0)),
                 point_stride=12,
                 fields=[PackedElementField(name=n, offset=4 * k, type=f32)
@@ -200,10 +223,10 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
             grid = GridChannel("/ground/costmap", context=ctx)
             res = float(costmap.resolution_m)
             y0 = costmap.y1_m - cls.shape[0] * res
-            t = max((m[0] for m in messages), default=epoch_ns)
-            t_s = (t - epoch_ns) / 1e9
+            t_s = max((m[0] for m in messages), default=ns(0.0))
+            t_s = (t_s - ns(0.0)) / 1e9
             add(t_s, grid, Grid(
-                timestamp=stamp(t_s), frame_id="site",
+                timestamp=stamp(e, t_s), frame_id="site",
                 pose=Pose(position=Vector3(x=costmap.x0_m, y=y0, z=0), orientation=_quat(0, 0, 0)),
                 column_count=cls.shape[1], cell_size=Vector2(x=res, y=res),
                 row_stride=cls.shape[1], cell_stride=1,

@@ -85,8 +85,11 @@ class MissionControl:
     """The server's state: the store, the live mission's queues (or none: a replay), the
     realtime clients and the requests waiting for the mission's reply."""
 
-    def __init__(self, *, store: TelemetryStore | None = None, to_sim=None):
+    def __init__(self, *, store: TelemetryStore | None = None, to_sim=None,
+                 foxglove_port: int | None = None, host: str = "127.0.0.1"):  # fmt: skip
         self.store = store or TelemetryStore()
+        self.foxglove_port, self.host = foxglove_port, host
+        self.foxglove = None
         self.to_sim = to_sim
         self.info: dict = {"name": "", "epoch_utc": "2000-01-01T00:00:00", "live": to_sim is
                            not None, "state": "waiting" if to_sim is not None else "replay"}
@@ -109,6 +112,15 @@ class MissionControl:
         self.epoch_ms = epoch_ms(self.info["epoch_utc"])
         if self.info.get("live"):
             self.info["state"] = "running"
+        if self.foxglove_port is not None and self.foxglove is None:
+            from lunar_drake.mission_control.foxglove_live import FoxgloveLive
+
+            try:
+                self.foxglove = FoxgloveLive(host=self.host, port=self.foxglove_port,
+                                             epoch_utc=self.info["epoch_utc"])  # fmt: skip
+                self.info["foxglove"] = f"ws://{self.host}:{self.foxglove.server.port}"
+            except Exception as exc:  # a busy port: the page still works
+                self.info["foxglove_error"] = f"Foxglove live server not started: {exc}"
 
     def ingest(self, msg: dict) -> None:
         """One message from the mission (:mod:`~lunar_drake.mission_control.live`)."""
@@ -129,6 +141,8 @@ class MissionControl:
             if "frame" in msg:
                 self.frame = msg["frame"]
             self.store.add(msg["datums"])
+            if self.foxglove is not None:
+                self.foxglove.batch(msg)
             self._broadcast({"clock": self.ms(msg["t_s"]), "sim_s": msg["t_s"],
                              "wall": msg.get("wall")})  # fmt: skip
         elif kind == "reply":
