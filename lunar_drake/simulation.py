@@ -278,6 +278,7 @@ def run_mission(
     realtime_rate: float | None = None,
     observers: tuple = (),
     observe_period_s: float = 0.1,
+    observe_offset_s: float = 0.0,
 ) -> str:
     """Runs ``run`` to ``scenario.simulation_duration`` (or an earlier stop) and returns
     why it stopped ("duration reached", or the reason).
@@ -291,9 +292,10 @@ def run_mission(
     Args:
         realtime_rate: pace the run to this multiple of real time (Drake's target
             realtime rate; 0: as fast as it can); None keeps the scenario's.
-        observers: :data:`Observer` callables; with any, the run advances in steps of
-            ``observe_period_s`` (s) and calls each between them. Pacing changes when
-            things happen on the wall clock, never what happens.
+        observers: :data:`Observer` callables; with any, the run advances to the times
+            ``observe_offset_s + k * observe_period_s`` (s) and calls each at those times
+            (an offset just after a software tick sees what that tick did). Pacing and
+            steps change when things happen on the wall clock, never what happens.
 
     Raises:
         SimulationError: the integrator failed; the message has the simulated time.
@@ -352,8 +354,8 @@ def run_mission(
         if not observers:
             simulator.AdvanceTo(end)
             return
-        step = float(observe_period_s)
-        k = 0
+        step, offset = float(observe_period_s), float(observe_offset_s)
+        k = -1
         while True:
             for observe in observers:
                 why = observe(run)
@@ -363,8 +365,8 @@ def run_mission(
             t = root.get_time()
             if t >= end or stop_reason[0] != "duration reached":
                 return
-            k = max(k + 1, math.floor(t / step + 1e-9) + 1)
-            status = simulator.AdvanceTo(min(k * step, end))
+            k = max(k + 1, math.floor((t - offset) / step + 1e-9) + 1)
+            status = simulator.AdvanceTo(min(offset + k * step, end))
             if status.reason() == status.ReturnReason.kReachedTerminationCondition:
                 return
 
@@ -496,6 +498,7 @@ def simulate(
     realtime_rate: float | None = None,
     observers: tuple = (),
     observe_period_s: float = 0.1,
+    observe_offset_s: float = 0.0,
 ) -> SimulationLogs:
     """Simulates ``scenario`` on ``site`` for ``scenario.simulation_duration`` seconds:
     :func:`build_mission`, :func:`run_mission` (see it for the stop conditions, pacing
@@ -513,7 +516,8 @@ def simulate(
     why = run_mission(run, progress=progress, stop_when=stop_when,
                       stop_check_period_s=stop_check_period_s,
                       stop_after_goals_s=stop_after_goals_s, realtime_rate=realtime_rate,
-                      observers=observers, observe_period_s=observe_period_s)  # fmt: skip
+                      observers=observers, observe_period_s=observe_period_s,
+                      observe_offset_s=observe_offset_s)  # fmt: skip
     return collect_logs(run, stop_reason=why)
 
 

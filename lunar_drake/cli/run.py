@@ -211,6 +211,11 @@ def command(args) -> int:
             server.close()
 
 
+#: A live mission's observers run this long after each ground tick (s): they publish what
+#: that tick took in at once, and a command they queue goes up at the next tick.
+OBSERVE_AFTER_TICK_S = 0.001
+
+
 def check_rate(rate: float | None, *, serve: bool) -> float | None:
     """``--rate``: None (as fast as possible; 1 with ``--serve``) or a finite rate >= 0."""
     if rate is None:
@@ -284,7 +289,8 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
             frames_dir=tmp / "frames" if scenario.logging.save_frames else None,
             realtime_rate=rate,
             observers=tuple(observers),
-            observe_period_s=0.5 / scenario.ground.rate_hz,
+            observe_period_s=1.0 / scenario.ground.rate_hz,
+            observe_offset_s=OBSERVE_AFTER_TICK_S,
         )
         if observers:
             scenario = with_actions(scenario, sorted(

@@ -115,7 +115,8 @@ class LiveObserver:
                 "extent_m": [mp.x0_m, mp.x0_m + mp.shape[1] * mp.resolution_m,
                              mp.y1_m - mp.shape[0] * mp.resolution_m, mp.y1_m],
                 "hillshade_png": png_bytes(hillshade_u8(mp.z, mp.resolution_m)),
-                "spawn_xy": [sc.rover.spawn_x_m, sc.rover.spawn_y_m]}  # fmt: skip
+                "spawn_xy": [sc.rover.spawn_x_m, sc.rover.spawn_y_m],
+                "ground_rate_hz": float(sc.ground.rate_hz)}  # fmt: skip
         self.outbox.put(site)
 
     def _handle_requests(self, run, root, now: float) -> str | None:

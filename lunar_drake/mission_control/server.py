@@ -10,8 +10,10 @@ milliseconds, ``site.epoch_utc`` + simulation time, as Open MCT expects):
 - ``GET /api/dictionary``: every point with units and format.
 - ``GET /api/history/{key}?start=&end=``: one point's samples.
 - ``GET /api/realtime`` (WebSocket): send ``{"subscribe": [keys]}`` /
-  ``{"unsubscribe": [keys]}``; receive ``{"datums": [{id, timestamp, value}...]}`` and
-  ``{"clock": ms}``; a malformed message gets ``{"error": ...}`` and the socket stays.
+  ``{"unsubscribe": [keys]}``; receive ``{"datums": [{id, timestamp, value}...],
+  "sim_s", "wall"}`` (the batch's simulation time and the wall time the mission
+  published it) and ``{"clock": ms}``; a malformed message gets ``{"error": ...}`` and
+  the socket stays.
 - ``GET /api/map``: goals, plan, track, science samples, costmap version;
   ``/api/map/hillshade.png``, ``/api/map/costmap.png``; ``/api/camera/latest.png``.
 - ``POST /api/command`` (:func:`~lunar_drake.mission_control.commands.parse_command`
@@ -99,6 +101,7 @@ class MissionControl:
         self.clients: set = set()
         self.pending: dict = {}
         self._ids = itertools.count(1)
+        self._batch = (None, None)  # (simulation s, publish wall s) of the batch in hand
         self.loop: asyncio.AbstractEventLoop | None = None
         self.epoch_ms = epoch_ms(self.info["epoch_utc"])
         self.store.listeners.append(self._fan_out)
@@ -140,6 +143,7 @@ class MissionControl:
                 self.costmap = msg["costmap"]
             if "frame" in msg:
                 self.frame = msg["frame"]
+            self._batch = (msg["t_s"], msg.get("wall"))
             self.store.add(msg["datums"])
             if self.foxglove is not None:
                 self.foxglove.batch(msg)
@@ -164,11 +168,13 @@ class MissionControl:
     def _fan_out(self, datums: list) -> None:
         if not self.clients or not datums:
             return
+        sim_s, wall = self._batch
         for c in list(self.clients):
             mine = [d for d in datums if d[0] in c.keys]
             if mine:
                 self._send(c, {"datums": [{"id": k, "timestamp": self.ms(t), "value": v}
-                                          for k, t, v in mine]})  # fmt: skip
+                                          for k, t, v in mine],
+                               "sim_s": sim_s, "wall": wall})  # fmt: skip
 
     def _broadcast(self, payload: dict) -> None:
         for c in list(self.clients):
