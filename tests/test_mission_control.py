@@ -234,7 +234,22 @@ class _Scripted:
 
     def __call__(self, run):
         while self.script and run.time_s >= self.script[0][0] - 1e-9:
-            self.inbox.put(self.script.pop(0)[1])
+            req = self.script.pop(0)[1]
+            self.inbox.put(req(run) if callable(req) else req)
+
+
+def _preview_in_a_hazard(run):
+    """A preview request at the centre of a lethal cell of the ground's a-priori map whose
+    nearest free cell is farther than the ground may move a goal."""
+    from scipy.ndimage import distance_transform_edt
+
+    from lunar_drake.autonomy.operations import goal_shift_limit_m
+
+    cm = run.operator.prior_costmap
+    depth = distance_transform_edt(~np.isfinite(cm.cost)) * cm.resolution_m
+    r, c = np.argwhere(depth > goal_shift_limit_m(run.operator.params) + 1e-6)[0]
+    x, y = cm.centre_of(r, c)
+    return {"id": 4, "op": "preview", "x_m": float(x), "y_m": float(y)}
 
 
 def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_run(cache):
@@ -253,6 +268,7 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
         (1.0, {"id": 1, "op": "preview", "x_m": 3.0, "y_m": 0.0}),
         (1.0, {"id": 2, "op": "command", "command": {"action": "goal", "x_m": 3.0, "y_m": 0.0}}),
         (1.5, {"id": 3, "op": "command", "command": {"action": "goal", "x_m": 1e4, "y_m": 0.0}}),
+        (2.0, _preview_in_a_hazard),
     ])  # fmt: skip
     meshcat = _FakeMeshcat(click_at_s={"Drive arc (2 m)": 8.0})
     controls = MeshcatControls(meshcat, echo=lambda *_: None)
@@ -276,6 +292,7 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     assert replies[1]["path"][-1] == pytest.approx([3.0, 0.0])
     assert replies[2]["ok"] and replies[2]["t_s"] == pytest.approx(1.0, abs=0.01)
     assert not replies[3]["ok"] and "off the ground's map" in replies[3]["error"]
+    assert not replies[4]["ok"] and "inside a hazard" in replies[4]["error"], replies[4]
     assert [a.action for a in obs.actions] == ["goal"]
     # the goal went up the link and the rover moved towards it
     assert logs.ground_goals and logs.ground_goals[0][0] == (3.0, 0.0)
@@ -360,7 +377,7 @@ def test_the_foxglove_live_server_advertises_the_live_topics():
     from lunar_drake.mission_control.foxglove_live import FoxgloveLive
 
     live = FoxgloveLive(host="127.0.0.1", port=0, epoch_utc="2027-11-15T00:00:00")
-    port = live.server.port() if callable(live.server.port) else live.server.port
+    port = live.server.port
     fields = dict.fromkeys(TELEMETRY_FIELDS, 0.0)
 
     async def main():

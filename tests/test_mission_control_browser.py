@@ -46,7 +46,8 @@ def live_mission(cache, tmp_path):
             "sensors: {camera: {enabled: true, width: 320, height: 240}, "
             "nss: {enabled: true}}}")  # fmt: skip
     cmd = [sys.executable, "-m", "lunar_drake.cli", "run", "--scenario", "goto",
-           "--scenario-text", text, "--serve", "--port", "0", "--rate", "2", "--no-meshcat",
+           "--scenario-text", text, "--serve", "--port", "0", "--foxglove-port", "0",
+           "--rate", "2", "--no-meshcat",
            "--no-progress", "--out", str(out)]  # fmt: skip
     env = {**os.environ, "LUNAR_DRAKE_CACHE": str(cache)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -75,6 +76,7 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
     from playwright.sync_api import sync_playwright
 
     url, proc, out = live_mission
+    assert _get(url + "api/info")["foxglove"].startswith("ws://127.0.0.1:")
     errors = []
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])

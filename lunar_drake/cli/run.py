@@ -200,7 +200,7 @@ def command(args) -> int:
         observer = LiveObserver(outbox=server.outbox, inbox=server.inbox)
         print(f"Mission control: {server.url} (the run is paced to {rate:g}x real time; "
               "the page's End button ends it early and writes it)", flush=True)  # fmt: skip
-        if foxglove is not None:
+        if foxglove:
             print(f"Foxglove: ws://{args.host or '127.0.0.1'}:{foxglove} once the site is "
                   "built (Foxglove: Open connection > Foxglove WebSocket)", flush=True)
     try:
