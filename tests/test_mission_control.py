@@ -71,6 +71,27 @@ def test_every_datum_has_a_dictionary_point_and_units():
     assert all(p.units or p.format in ("enum", "int", "string") for p in dic.POINTS)
 
 
+def test_science_records_become_datums_and_heat_samples_at_the_estimate():
+    from lunar_drake.comms.science import ScienceRecord
+    from lunar_drake.science.nirvss import BANDS
+    from lunar_drake.science.nss import NSSConfig
+
+    pose = (2.0, -1.0, 0.0, 0.0, 0.0, 0.3)
+    bands = [0.0] * len(BANDS)
+    bands[BANDS.index("ice")], bands[BANDS.index("oh")] = 0.05, 0.02
+    nir = ScienceRecord("nirvss", 3, 10.0, (*bands, 110.0), 0.0, pose)
+    datums, heat = dic.science_datums(12.5, nir)
+    assert dict((k, v) for k, _, v in datums) == {"nirvss.ice": 0.05, "nirvss.oh": 0.02,
+                                                  "lcs.temperature": 110.0}  # fmt: skip
+    assert heat == {"nirvss_ice": (2.0, -1.0, 0.05), "lcs_temperature": (2.0, -1.0, 110.0)}
+    cfg = NSSConfig()
+    dry = cfg.epithermal_dry_cps * 10.0  # counts of dry regolith over 10 s: 0 wt%
+    nss = ScienceRecord("nss", 1, 10.0, (dry, 5.0), 10.0, pose)
+    datums, heat = dic.science_datums(12.5, nss, nss_config=cfg)
+    assert dict((k, v) for k, _, v in datums)["nss.weh"] == pytest.approx(0.0, abs=1e-9)
+    assert heat["nss_weh"][:2] == (2.0, -1.0) and set(heat) <= set(dic.HEAT_LAYERS)
+
+
 def test_store_history_is_inclusive_ordered_and_refuses_unknown_keys():
     s = TelemetryStore()
     got = []

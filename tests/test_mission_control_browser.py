@@ -98,7 +98,16 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
         page.wait_for_function("() => window.lunarMap.root.dataset.ack === 'acknowledged'",
                                timeout=90_000)  # fmt: skip
         # the NSS heat layer has samples to draw
-        page.wait_for_function("() => window.lunarMap.state.science.length > 0", timeout=90_000)
+        page.wait_for_function("() => (window.lunarMap.state.science.nss_weh || []).length > 0",
+                               timeout=90_000)  # fmt: skip
+        # the picture for the docs once the goal is reached (or a minute on)
+        try:
+            page.wait_for_function(
+                "() => (window.lunarMap.state.goals || []).some((g) => g[2] === 'reached')",
+                timeout=60_000)  # fmt: skip
+        except Exception:  # a slow machine: take the picture as it is
+            pass
+        page.wait_for_timeout(1500)
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOTS / "live.png"))
         browser.close()

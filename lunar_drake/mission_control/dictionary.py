@@ -77,6 +77,9 @@ POINTS: tuple[Point, ...] = (
     Point("nss.weh", "NSS water-equivalent hydrogen (ground estimate)", "wt%", group="science"),
     Point("nss.epithermal", "NSS epithermal counts", "counts", group="science"),
     Point("nss.thermal", "NSS thermal counts", "counts", group="science"),
+    Point("nirvss.ice", "NIRVSS ice band depth", "-", group="science"),
+    Point("nirvss.oh", "NIRVSS OH band depth", "-", group="science"),
+    Point("lcs.temperature", "LCS surface temperature", "K", group="science"),
     *(Point(k, n, "", "enum", ("nominal", "ACTIVE"), group="cw") for k, n in CAUTIONS.items()),
 )
 
@@ -180,3 +183,30 @@ def goal_datums(t_s: float, status) -> list:
     t = float(t_s)
     return [("ground.goals", t, len(status)),
             ("ground.goals_reached", t, sum(s == "reached" for s in status))]  # fmt: skip
+
+
+#: Heat layers of the site map: name -> (the science record's instrument, what it shows).
+HEAT_LAYERS = {"nss_weh": ("nss", "NSS water-equivalent hydrogen (wt%)"),
+               "nirvss_ice": ("nirvss", "NIRVSS ice band depth"),
+               "lcs_temperature": ("nirvss", "LCS surface temperature (K)")}  # fmt: skip
+
+
+def science_datums(t_received_s: float, record, *, nss_config=None) -> tuple[list, dict]:
+    """Datums of one received science record and its heat-map samples
+    ``{layer: (x, y, value)}`` at the on-board estimate carried with it."""
+    from lunar_drake.science.nirvss import BANDS
+
+    t = float(t_received_s)
+    x, y = float(record.pose_estimate[0]), float(record.pose_estimate[1])
+    v = record.values
+    if record.instrument == "nss" and nss_config is not None:
+        from lunar_drake.science.nss import weh_from_epithermal
+
+        weh = float(weh_from_epithermal(v[0], record.integration_s, config=nss_config))
+        return ([("nss.weh", t, weh), ("nss.epithermal", t, float(v[0])),
+                 ("nss.thermal", t, float(v[1]))], {"nss_weh": (x, y, weh)})  # fmt: skip
+    if record.instrument == "nirvss":
+        ice, oh, temp = float(v[BANDS.index("ice")]), float(v[BANDS.index("oh")]), float(v[-1])
+        return ([("nirvss.ice", t, ice), ("nirvss.oh", t, oh), ("lcs.temperature", t, temp)],
+                {"nirvss_ice": (x, y, ice), "lcs_temperature": (x, y, temp)})  # fmt: skip
+    return [], {}

@@ -237,21 +237,15 @@ class LiveObserver:
         if (sx := run.ground_system("ground.science")) is not None:
             got = sx.received_since(sx.GetMyContextFromRoot(root), self._n_science)
             self._n_science += len(got)
-            science = []
+            heat: dict = {}
             for d in got:
-                r = d.message.payload
-                if r.instrument != "nss":
-                    continue
-                from lunar_drake.science.nss import weh_from_epithermal
-
-                weh = float(weh_from_epithermal(r.values[0], r.integration_s,
-                                                config=run.scenario.sensors.nss))  # fmt: skip
-                t = d.t_received_s
-                datums += [("nss.weh", t, weh), ("nss.epithermal", t, float(r.values[0])),
-                           ("nss.thermal", t, float(r.values[1]))]  # fmt: skip
-                science.append([float(r.pose_estimate[0]), float(r.pose_estimate[1]), weh])
-            if science:
-                extra["science"] = science
+                more, samples = dic.science_datums(d.t_received_s, d.message.payload,
+                                                   nss_config=run.scenario.sensors.nss)  # fmt: skip
+                datums += more
+                for layer, xyv in samples.items():
+                    heat.setdefault(layer, []).append(list(xyv))
+            if heat:
+                extra["science"] = heat
         return datums, extra
 
     def _preview_image(self, frame) -> np.ndarray:

@@ -48,6 +48,11 @@ def run_datums(run_dir: str | Path, *, telemetry_period_s: float = 1.0,
         out += [("nss.weh", t, float(r["weh_est_wt_pct"])),
                 ("nss.epithermal", t, float(r["epithermal_counts"])),
                 ("nss.thermal", t, float(r["thermal_counts"]))]  # fmt: skip
+    lcs = _rows(d / "lcs.csv")
+    for r, c in zip(_rows(d / "nirvss.csv"), lcs, strict=False):
+        t = float(r["t_received_s"])
+        out += [("nirvss.ice", t, float(r["bd_ice"])), ("nirvss.oh", t, float(r["bd_oh"])),
+                ("lcs.temperature", t, float(c["temperature_K"]))]  # fmt: skip
     out.sort(key=lambda d: d[1])
     return out
 
@@ -85,5 +90,11 @@ def load_run(mc, run_dir: str | Path) -> None:
     goals = summary.get("ground", {}).get("goals", [])
     mc.store.map.goals = [[*g.get("goal_xy_m", [math.nan, math.nan]), g.get("status", "")]
                           for g in goals]  # fmt: skip
-    mc.store.map.science = [[float(r["x_est_m"]), float(r["y_est_m"]), float(r["weh_est_wt_pct"])]
-                            for r in _rows(d / "nss.csv")]  # fmt: skip
+    heat = mc.store.map.science
+    xy = lambda r: [float(r["x_est_m"]), float(r["y_est_m"])]  # noqa: E731
+    if rows := _rows(d / "nss.csv"):
+        heat["nss_weh"] = [[*xy(r), float(r["weh_est_wt_pct"])] for r in rows]
+    if rows := _rows(d / "nirvss.csv"):
+        heat["nirvss_ice"] = [[*xy(r), float(r["bd_ice"])] for r in rows]
+    if rows := _rows(d / "lcs.csv"):
+        heat["lcs_temperature"] = [[*xy(r), float(r["temperature_K"])] for r in rows]

@@ -36,7 +36,7 @@ from aiohttp import WSMsgType, web
 
 from lunar_drake.errors import ConfigError, LunarDrakeError
 from lunar_drake.mission_control.commands import CommandError, parse_command
-from lunar_drake.mission_control.dictionary import POINTS
+from lunar_drake.mission_control.dictionary import HEAT_LAYERS, POINTS
 from lunar_drake.mission_control.store import TelemetryStore, UnknownPointError, check_key
 
 WEB_DIR = Path(__file__).parent / "web"
@@ -137,8 +137,8 @@ class MissionControl:
             if "plan" in msg:
                 m.path = msg["plan"]["path"]
                 m.plan_seq = msg["plan"]["seq"]
-            if "science" in msg:
-                m.science += msg["science"]
+            for layer, samples in msg.get("science", {}).items():
+                m.science.setdefault(layer, []).extend(samples)
             if "costmap" in msg:
                 self.costmap = msg["costmap"]
             if "frame" in msg:
@@ -313,7 +313,8 @@ def make_app(mc: MissionControl) -> web.Application:
             cm = {k: v for k, v in mc.costmap.items() if k != "png"}
         return web.json_response({
             "extent_m": mc.info.get("extent_m"), "goals": m.goals, "plan": m.path,
-            "plan_seq": m.plan_seq, "track": track, "science": m.science, "costmap": cm,
+            "plan_seq": m.plan_seq, "heat_layers": {k: v[1] for k, v in HEAT_LAYERS.items()},
+            "track": track, "science": m.science, "costmap": cm,
             "rover": track[-1] if track else mc.info.get("spawn_xy"),
             "frame": None if mc.frame is None else {k: v for k, v in mc.frame.items()
                                                     if k != "png"},

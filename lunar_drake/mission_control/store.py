@@ -46,12 +46,13 @@ class Series:
 class MapState:
     """What the site map shows: ``goals`` ((x, y, status), ...), the planned ``path``
     ((x, y), ...) of the goto ``plan_seq``, and the science samples placed by the ground
-    (``science``: (x, y, value) ...)."""
+    (``science``: heat layer -> [(x, y, value), ...]; layers of
+    :data:`~lunar_drake.mission_control.dictionary.HEAT_LAYERS`)."""
 
     goals: list = dc.field(default_factory=list)
     path: list = dc.field(default_factory=list)
     plan_seq: int = -1
-    science: list = dc.field(default_factory=list)
+    science: dict = dc.field(default_factory=dict)
 
 
 class TelemetryStore:

@@ -265,7 +265,7 @@
       name: 'Realtime',
       timeSystem: 'utc',
       clock: 'remote-clock',
-      clockOffsets: { start: -10 * MIN, end: 15 * 1000 }
+      clockOffsets: { start: -3 * MIN, end: 10 * 1000 }
     };
     openmct.install(openmct.plugins.Conductor({ menuOptions: info.live ? [live, fixed] : [fixed] }));
     if (!location.hash || location.hash === '#/' || location.hash === '#') {

@@ -46,7 +46,9 @@
         };
         bar.append(el('label', {}, box, ` ${name}`));
       }
-      bar.append(this.sendBtn, this.cancelBtn, this.status);
+      this.heatSelect = el('select', { title: 'heat layer' });
+      this.heatSelect.onchange = () => this.draw();
+      bar.append(this.heatSelect, this.sendBtn, this.cancelBtn, this.status);
       this.root.append(this.canvas, bar);
       element.append(this.root);
       this.sendBtn.onclick = () => this.sendGoal();
@@ -248,18 +250,27 @@
         g.drawImage(this.cost, a0, b0, a1 - a0, b1 - b0);
         g.imageSmoothingEnabled = true;
       }
-      if (this.layers.science && this.state.science.length) {
-        const vals = this.state.science.map((s) => s[2]);
+      const layers = Object.keys(this.state.science || {});
+      if (layers.length && this.heatSelect.options.length !== layers.length) {
+        const keep = this.heatSelect.value;
+        this.heatSelect.replaceChildren(...layers.map((k) => el('option', { value: k, textContent: this.state.heat_layers[k] || k })));
+        if (layers.includes(keep)) this.heatSelect.value = keep;
+      }
+      const samples = (this.state.science || {})[this.heatSelect.value] || [];
+      if (this.layers.science && samples.length) {
+        const vals = samples.map((s) => s[2]);
         const lo = Math.min(...vals);
         const hi = Math.max(...vals);
         const r = Math.max(1.5, 0.2 * this.view.scale);
-        for (const [x, y, v] of this.state.science) {
+        for (const [x, y, v] of samples) {
           const [px, py] = this.toPx(x, y);
           g.fillStyle = heat(v, lo, hi);
           g.beginPath();
           g.arc(px, py, r, 0, 2 * Math.PI);
           g.fill();
         }
+        g.fillStyle = '#ddd';
+        g.fillText(`heat: ${lo.toPrecision(3)} (blue) to ${hi.toPrecision(3)} (red)`, 6, 14);
       }
       const line = (pts, color, width, dash) => {
         if (!pts || pts.length < 2) {
