@@ -5,7 +5,8 @@
 1. **Live latency and pacing.** ``lunar-drake run --serve --rate 1`` on the ``goto``
    site without cameras, telemetry at 10 Hz, for ``--duration`` simulated seconds
    (default 600: ten minutes); ``--clients`` (10) WebSocket clients each subscribe to
-   every point of the dictionary. Latency of a datum = its arrival at a client minus the
+   every point of the dictionary. Latency of a telemetry datum (``rover.*``, ``link.*``:
+   those stamped with a packet's delivery) = its arrival at a client minus the
    wall time at which the paced mission's ground software took the packet in (its
    receiver's tick after the link delivered it: the batch's publish time less the
    simulated time from that tick to the publish, over the rate). Also: from the link's
@@ -95,8 +96,8 @@ async def _clients(url: str, n: int, keys: list[str], rate: float, done) -> list
                 wall, sim = data["wall"], data["sim_s"]
                 transfer.append(now - wall)
                 for d in data["datums"]:
-                    if d["id"] == "mission.time":
-                        continue
+                    if not d["id"].startswith(("rover.", "link.")):
+                        continue  # stamped at the ground's tick, not a packet's delivery
                     t = (d["timestamp"] - epoch) / 1000.0  # the link's delivery (sim s)
                     t_in = math.ceil(t * tick_hz - 1e-6) / tick_hz  # the ground's intake
                     lat.append(now - (wall - (sim - t_in) / rate))

@@ -118,6 +118,8 @@ def test_commands_are_checked_with_one_line_each():
         ({"action": "drive_arc", "speed_mps": 3, "distance_m": 1}, r"in \[-1, 1\]"),
         ({"action": "point_mast", "pan_deg": 10}, "both"),
         ({"action": "drill", "depth_m": float("nan")}, "finite"),
+        ({"action": "goal", "x_m": 1e308, "y_m": 0}, r"x_m = 1e\+308 must be in"),
+        ({"action": "goal", "x_m": 10**400, "y_m": 0}, "finite"),
     ]:
         with pytest.raises(CommandError, match=msg) as err:
             parse_command(bad)
@@ -174,8 +176,16 @@ def test_history_dictionary_and_json_errors():
         assert r.status == 404 and "rover.nope" in (await r.json())["error"]
         r = await c.get("/api/history/rover.x?start=yesterday")
         assert r.status == 400 and "start" in (await r.json())["error"]
-        r = await c.post("/api/command", data="{not json")
+        r = await c.post("/api/command", data="{not json",
+                         headers={"Content-Type": "application/json"})  # fmt: skip
         assert r.status == 400 and "not valid JSON" in (await r.json())["error"]
+        r = await c.post("/api/command", data='{"action": "stop"}')  # text/plain
+        assert r.status == 415 and "application/json" in (await r.json())["error"]
+        r = await c.post("/api/command", json={"action": "stop"},
+                         headers={"Origin": "http://evil.example"})  # fmt: skip
+        assert r.status == 403 and "evil.example" in (await r.json())["error"]
+        r = await c.get("/api/realtime", headers={"Origin": "http://evil.example"})
+        assert r.status == 403
         r = await c.post("/api/command", json={"action": "stop"})
         assert r.status == 409 and "replay" in (await r.json())["error"]
         r = await c.post("/api/command", json={"action": "warp"})
@@ -311,7 +321,7 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     replies = {m["id"]: m for m in msgs if m["kind"] == "reply"}
     assert replies[1]["ok"] and len(replies[1]["path"]) >= 2
     assert replies[1]["path"][-1] == pytest.approx([3.0, 0.0])
-    assert replies[2]["ok"] and replies[2]["t_s"] == pytest.approx(1.0, abs=0.01)
+    assert replies[2]["ok"] and replies[2]["t_s"] == pytest.approx(1.1)  # the next tick
     assert not replies[3]["ok"] and "off the ground's map" in replies[3]["error"]
     assert not replies[4]["ok"] and "inside a hazard" in replies[4]["error"], replies[4]
     assert [a.action for a in obs.actions] == ["goal"]

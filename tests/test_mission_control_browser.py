@@ -119,5 +119,10 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
     assert proc.wait(120) == 0
     scenario = (out / "scenario.yaml").read_text()
     assert "action: goal" in scenario
+    # ended from the page: scenario.yaml runs that long (so it reproduces the session)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "ended from mission control"
+    duration = float(re.search(r"^simulation_duration: (\S+)", scenario, re.M).group(1))
+    assert duration == pytest.approx(summary["simulated_s"]) and duration < 400.0
     events = (out / "ground_events.csv").read_text()
     assert re.search(r"goal,.*0: \(3\.\d\d, -?0\.\d\d\) m", events)

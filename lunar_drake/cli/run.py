@@ -197,12 +197,15 @@ def command(args) -> int:
         server = ServerProcess(host=args.host or "127.0.0.1", port=args.port,
                                allow_remote=args.host is not None,
                                foxglove_port=foxglove)  # fmt: skip
-        observer = LiveObserver(outbox=server.outbox, inbox=server.inbox)
+        observer = LiveObserver(outbox=server.outbox, inbox=server.inbox,
+                                alive=server.process.is_alive)  # fmt: skip
         print(f"Mission control: {server.url} (the run is paced to {rate:g}x real time; "
               "the page's End button ends it early and writes it)", flush=True)  # fmt: skip
-        if foxglove:
-            print(f"Foxglove: ws://{args.host or '127.0.0.1'}:{foxglove} once the site is "
-                  "built (Foxglove: Open connection > Foxglove WebSocket)", flush=True)
+        if foxglove is not None:
+            where = f"port {foxglove}" if foxglove else "a free port"
+            print(f"Foxglove: a live WebSocket server on {where} once the site is built "
+                  f"({server.url}api/info says where; Foxglove: Open connection > Foxglove "
+                  "WebSocket)", flush=True)  # fmt: skip
     try:
         return _run(args, scenario=scenario, name=name, out=out, rate=rate, server=server,
                     observer=observer)  # fmt: skip
@@ -237,9 +240,9 @@ def with_actions(scenario, actions: list):
     ``ground.actions``, so the run's ``scenario.yaml`` reproduces them."""
     import copy
 
-    if not actions:
-        return scenario
     out = copy.deepcopy(scenario)
+    if not actions:
+        return out
     out.ground.actions = [*out.ground.actions, *actions]
     return out
 
@@ -295,6 +298,8 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
         if observers:
             scenario = with_actions(scenario, sorted(
                 (a for o in observers for a in o.actions), key=lambda a: a.t_s))
+            if observer.ended_s is not None:  # ended from the page: the run's length
+                scenario.simulation_duration = float(observer.ended_s)
         summary = metrics.summarize(scenario=scenario, site=site, logs=logs)
         timing = {
             "site_s": t_site,
@@ -314,7 +319,7 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
     _report(summary, timing=timing, t_site=t_site, scenario=scenario, out=out,
             meshcat=meshcat)  # fmt: skip
     if observer is not None:
-        observer.finish(stop_reason=summary["stop_reason"])
+        observer.finish(simulated_s=summary["simulated_s"])
         print(f"Mission control: {server.url} (the finished run)"
               + ("" if args.wait else "; closing (--wait keeps it open)"), flush=True)
     if meshcat is not None:

@@ -6,6 +6,5 @@ subscribers; :mod:`.live` is the simulation side of a live mission (an observer 
 publishes each ground tick's news and applies commands from the network);
 :mod:`.server` is the aiohttp server under the Open MCT page (``web/``);
 :mod:`.replay` loads a finished run; :mod:`.recording` writes ``run.mcap`` for Foxglove.
-Everything here sees only what the ground received (stamped with reception time),
-except an instructor overlay that says it is truth.
+Everything here sees only what the ground received (stamped with reception time).
 """

@@ -16,7 +16,7 @@ class CommandError(ConfigError):
 
 #: Each action's arguments: name -> (default or None if required, (lo, hi)).
 ARGS = {
-    "goal": {"x_m": (None, None), "y_m": (None, None)},
+    "goal": {"x_m": (None, (-1e6, 1e6)), "y_m": (None, (-1e6, 1e6))},
     "stop": {},
     "resume": {},
     "drive_arc": {"speed_mps": (None, (-1.0, 1.0)), "curvature_per_m": (0.0, (-10.0, 10.0)),
@@ -52,7 +52,10 @@ def parse_command(data) -> dict:
             raise CommandError(f"{action}: argument {name!r} is required")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise CommandError(f"{action}: {name} = {value!r} must be a number")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:
+            value = math.inf
         if not math.isfinite(value):
             raise CommandError(f"{action}: {name} = {value!r} must be finite")
         if bounds is not None and not bounds[0] <= value <= bounds[1]:
@@ -97,3 +100,10 @@ def as_action(command: dict, *, t_s: float) -> OperatorAction:
     if command["action"] == "point_mast" and "pan_deg" not in kw:
         kw["auto"] = True
     return OperatorAction(t_s=float(t_s), action=command["action"], **kw)
+
+
+def next_tick_s(t_s: float, rate_hz: float) -> float:
+    """The first ground tick at or after ``t_s`` (s): when a request queued at ``t_s``
+    goes up, and so the time its ``ground.actions`` entry must carry to be applied at the
+    same tick, after that tick's own scheduled actions."""
+    return math.ceil(float(t_s) * rate_hz - 1e-6) / rate_hz

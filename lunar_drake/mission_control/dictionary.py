@@ -203,6 +203,8 @@ def science_datums(t_received_s: float, record, *, nss_config=None) -> tuple[lis
         from lunar_drake.science.nss import weh_from_epithermal
 
         weh = float(weh_from_epithermal(v[0], record.integration_s, config=nss_config))
+        if not math.isfinite(weh):  # no counts: no estimate
+            return [("nss.epithermal", t, float(v[0])), ("nss.thermal", t, float(v[1]))], {}
         return ([("nss.weh", t, weh), ("nss.epithermal", t, float(v[0])),
                  ("nss.thermal", t, float(v[1]))], {"nss_weh": (x, y, weh)})  # fmt: skip
     if record.instrument == "nirvss":

@@ -21,8 +21,15 @@ import numpy as np
 from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS
 from lunar_drake.errors import LunarDrakeError
 from lunar_drake.mission_control import dictionary as dic
-from lunar_drake.mission_control.commands import apply_command, as_action, parse_command
+from lunar_drake.mission_control.commands import (
+    apply_command,
+    as_action,
+    next_tick_s,
+    parse_command,
+)
 
+#: The stop reason of a mission ended from mission control.
+ENDED = "ended from mission control"
 #: Costmap cell classes sent to displays: free, lethal on the a-priori map, lethal until
 #: stereo confirms it (an unconfirmed orbital slope), lethal found by stereo.
 COSTMAP_CLASSES = ("free", "lethal_prior", "unconfirmed", "lethal_stereo")
@@ -70,11 +77,16 @@ class LiveObserver:
         frame_width_px: stereo previews are scaled to this width.
         pose_period_s: how often the ground's pose estimate is published (s, sim time).
         costmap_period_s: the costmap is sent at most this often (s, sim time).
+        alive: ``alive()`` -> whether the server is still there (None: assume so); when
+            it has gone, nothing more is published and the run goes on.
     """
 
     def __init__(self, *, outbox, inbox, frame_width_px: int = 320,
-                 pose_period_s: float = 0.5, costmap_period_s: float = 2.0):  # fmt: skip
+                 pose_period_s: float = 0.5, costmap_period_s: float = 2.0,
+                 alive=None):  # fmt: skip
         self.outbox, self.inbox = outbox, inbox
+        self.alive, self._gone = alive, False
+        self.ended_s: float | None = None
         self.frame_width_px = int(frame_width_px)
         self.pose_period_s = float(pose_period_s)
         self.costmap_period_s = float(costmap_period_s)
@@ -92,11 +104,19 @@ class LiveObserver:
     # ----------------------------------------------------------------------- observer
 
     def __call__(self, run) -> str | None:
+        if self.alive is not None and not self.alive():
+            if not self._gone:
+                self._gone = True
+                print("mission control: the server process has gone; the run goes on",
+                      flush=True)  # fmt: skip
+            return None
         root = run.root
         now = run.time_s
         if not self._started:
             self._start(run)
         why = self._handle_requests(run, root, now)
+        if why is not None:
+            self.ended_s = now
         datums, extra = self._news(run, root, now)
         datums.append(("mission.time", now, now))
         if datums or extra:
@@ -127,8 +147,14 @@ class LiveObserver:
             except queue.Empty:
                 return why
             rid, op = req.get("id"), req.get("op")
+            if req.get("expires") is not None and time.time() > req["expires"]:
+                self._reply(rid, ok=False, error="the request expired before the mission "
+                                                 "could take it; nothing was sent")  # fmt: skip
+                continue
             try:
-                if op == "end":
+                if why is not None:
+                    self._reply(rid, ok=False, error="the mission is ending")
+                elif op == "end":
                     why = "ended from mission control"
                     self._reply(rid, ok=True, t_s=now)
                 elif op == "preview":
@@ -137,12 +163,15 @@ class LiveObserver:
                 elif op == "command":
                     cmd = parse_command(req.get("command"))
                     apply_command(run.operator, root, cmd)
-                    self.actions.append(as_action(cmd, t_s=now))
-                    self._reply(rid, ok=True, t_s=now, command=cmd)
+                    t_up = next_tick_s(now, run.scenario.ground.rate_hz)
+                    self.actions.append(as_action(cmd, t_s=t_up))
+                    self._reply(rid, ok=True, t_s=t_up, command=cmd)
                 else:
                     self._reply(rid, ok=False, error=f"unknown request {op!r}")
             except LunarDrakeError as exc:
                 self._reply(rid, ok=False, error=str(exc))
+            except Exception as exc:  # a request must never end the mission
+                self._reply(rid, ok=False, error=f"{type(exc).__name__}: {exc}")
 
     def _reply(self, rid, **kw) -> None:
         self.outbox.put({"kind": "reply", "id": rid, **kw})
@@ -261,9 +290,12 @@ class LiveObserver:
         step = max(1, math.ceil(a.shape[1] / self.frame_width_px))
         return a[::step, ::step]
 
-    def finish(self, *, stop_reason: str) -> None:
-        """Tells the server the mission has ended."""
-        self.outbox.put({"kind": "done", "stop_reason": stop_reason})
+    def finish(self, *, simulated_s: float) -> None:
+        """Tells the server the mission has ended (at ``simulated_s``; not why: a stop
+        reason may name the true pose)."""
+        if self.alive is None or self.alive():
+            self.outbox.put({"kind": "done",
+                             "stop_reason": f"the mission ended at t = {simulated_s:.1f} s"})
 
 
 def _classes_rgba(cls: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ as the page's commands and is written down as a ``ground.actions`` entry."""
 from __future__ import annotations
 
 from lunar_drake.errors import LunarDrakeError
-from lunar_drake.mission_control.commands import apply_command, as_action
+from lunar_drake.mission_control.commands import apply_command, as_action, next_tick_s
 
 BUTTONS = {"Stop rover": {"action": "stop"}, "Resume rover": {"action": "resume"},
            "Drive arc (2 m)": {"action": "drive_arc"}}  # fmt: skip
@@ -46,6 +46,7 @@ class MeshcatControls:
             except LunarDrakeError as exc:
                 self.echo(f"Meshcat: {name} refused: {exc}")
                 continue
-            self.actions.append(as_action(cmd, t_s=run.time_s))
+            self.actions.append(as_action(cmd, t_s=next_tick_s(run.time_s,
+                                                               run.scenario.ground.rate_hz)))
             self.echo(f"Meshcat: {name} at t = {run.time_s:.1f} s")
         return None

@@ -7,8 +7,12 @@ import asyncio
 import contextlib
 import multiprocessing as mp
 import signal
+import time
 
 from lunar_drake.errors import ConfigError
+
+#: How long a server may take to start (s): a replay may rebuild the run's site.
+START_TIMEOUT_S = 900.0
 
 
 def _server_main(outbox, inbox, ready, host: str, port: int, allow_remote: bool,
@@ -17,12 +21,19 @@ def _server_main(outbox, inbox, ready, host: str, port: int, allow_remote: bool,
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
     from lunar_drake.mission_control.server import MissionControl, start_server
 
+    _watch_parent()
+
     async def main():
         if replay_dir is not None:
+            from lunar_drake.errors import LunarDrakeError
             from lunar_drake.mission_control.replay import load_run
 
             mc = MissionControl(store=None, to_sim=None)
-            load_run(mc, replay_dir)
+            try:
+                load_run(mc, replay_dir)
+            except (LunarDrakeError, OSError, ValueError, KeyError) as exc:
+                ready.send(("error", f"cannot load {replay_dir!r}: {exc}"))
+                return
         else:
             mc = MissionControl(to_sim=inbox, foxglove_port=foxglove_port, host=host)
         try:
@@ -31,13 +42,31 @@ def _server_main(outbox, inbox, ready, host: str, port: int, allow_remote: bool,
             ready.send(("error", str(exc)))
             return
         addr = runner.addresses[0]
-        ready.send(("ok", f"http://{addr[0]}:{addr[1]}/"))
+        h = f"[{addr[0]}]" if ":" in addr[0] else addr[0]
+        ready.send(("ok", f"http://{h}:{addr[1]}/"))
         if outbox is not None:
             mc.pump(outbox)
         await asyncio.Event().wait()
 
     with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(main())
+
+
+def _watch_parent() -> None:
+    """Exits this process when its parent has gone (killed outright), so the port is not
+    held by an orphan."""
+    import os
+    import threading
+    import time
+
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 class ServerProcess:
@@ -68,9 +97,13 @@ class ServerProcess:
         )  # fmt: skip
         self.process.start()
         child.close()
-        if not parent.poll(120.0):
-            self.close()
-            raise ConfigError("the mission-control server did not start within 120 s")
+        deadline = time.monotonic() + START_TIMEOUT_S  # a replay may rebuild its site
+        while not parent.poll(0.5):
+            if not self.process.is_alive() or time.monotonic() > deadline:
+                self.close()
+                raise ConfigError("the mission-control server did not start (its process "
+                                  + ("died)" if not self.process.is_alive() else
+                                     f"took over {START_TIMEOUT_S:g} s)"))  # fmt: skip
         try:
             status, text = parent.recv()
         except EOFError:

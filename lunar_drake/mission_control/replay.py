@@ -1,6 +1,8 @@
 """A finished run directory as mission control serves it (``lunar-drake serve RUN``):
-the same datums the live mission published, rebuilt from what the ground received
-(``telemetry.csv``, ``ground_pose.csv``, ``ground_events.csv``, ``nss.csv``)."""
+the telemetry, pose, event and science datums the live mission published, rebuilt from
+what the ground received (``telemetry.csv``, ``ground_pose.csv``, ``ground_events.csv``,
+``nss.csv``, ``nirvss.csv``, ``lcs.csv``; not the mission clock, the goal counts or the
+loss-of-signal caution, which a live mission publishes as it goes)."""
 
 from __future__ import annotations
 
@@ -71,7 +73,7 @@ def load_run(mc, run_dir: str | Path) -> None:
     site = {"kind": "site", "epoch_utc": sc.site.epoch_utc, "name": sc.name or d.name,
             "duration_s": float(summary.get("simulated_s", sc.simulation_duration)),
             "spawn_xy": [sc.rover.spawn_x_m, sc.rover.spawn_y_m], "live": False,
-            "stop_reason": summary.get("stop_reason", ""), "run_dir": str(d.resolve())}  # fmt: skip
+            "run_dir": str(d.resolve())}  # fmt: skip
     try:
         from lunar_drake import preflight
         from lunar_drake.site import load_site
@@ -88,8 +90,8 @@ def load_run(mc, run_dir: str | Path) -> None:
     mc.store.add(run_datums(d, telemetry_period_s=1.0 / sc.flight.telemetry_rate_hz,
                            min_soc=sc.flight.safety.min_soc))  # fmt: skip
     goals = summary.get("ground", {}).get("goals", [])
-    mc.store.map.goals = [[*g.get("goal_xy_m", [math.nan, math.nan]), g.get("status", "")]
-                          for g in goals]  # fmt: skip
+    mc.store.map.goals = [[*g["goal_xy_m"], g.get("status", "")] for g in goals
+                          if len(g.get("goal_xy_m") or ()) == 2]  # fmt: skip
     heat = mc.store.map.science
     xy = lambda r: [float(r["x_est_m"]), float(r["y_est_m"])]  # noqa: E731
     if rows := _rows(d / "nss.csv"):

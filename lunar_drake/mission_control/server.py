@@ -30,6 +30,7 @@ import itertools
 import json
 import math
 import threading
+import time
 from pathlib import Path
 
 from aiohttp import WSMsgType, web
@@ -40,6 +41,9 @@ from lunar_drake.mission_control.dictionary import HEAT_LAYERS, POINTS
 from lunar_drake.mission_control.store import TelemetryStore, UnknownPointError, check_key
 
 WEB_DIR = Path(__file__).parent / "web"
+#: A request the live mission has not taken within this many seconds (wall) is dropped
+#: unsent (the mission checks it), so a timed-out command never runs later.
+REQUEST_TIMEOUT_S = 10.0
 #: Datums a slow realtime client may have waiting before it is dropped.
 CLIENT_BACKLOG = 5000
 
@@ -217,21 +221,40 @@ class MissionControl:
                                   "mission (lunar-drake run --serve)")  # fmt: skip
         if self.info.get("state") == "done":
             raise _HttpError(409, "the mission has ended")
+        if self.info.get("state") == "waiting":
+            raise _HttpError(409, "the mission is still being built (site, world model); "
+                                  "try again when /api/info says running")  # fmt: skip
         rid = next(self._ids)
         fut = self.loop.create_future()
         self.pending[rid] = fut
-        self.to_sim.put({"id": rid, "op": op, **kw})
+        self.to_sim.put({"id": rid, "op": op, "expires": time.time() + REQUEST_TIMEOUT_S, **kw})
         try:
-            return await asyncio.wait_for(fut, 10.0)
+            return await asyncio.wait_for(fut, REQUEST_TIMEOUT_S + 5.0)
         except asyncio.TimeoutError:
             self.pending.pop(rid, None)
-            raise _HttpError(504, f"the mission did not answer {op!r} within 10 s") from None
+            raise _HttpError(504, f"the mission did not answer {op!r} in time; it was not "
+                                  "sent") from None  # fmt: skip
 
 
 class _HttpError(Exception):
     def __init__(self, status: int, message: str):
         super().__init__(message)
         self.status = status
+
+
+def _finite(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
+
+
+def _finite_json(data) -> web.Response:
+    """JSON with NaN and infinities as null (browsers cannot parse them)."""
+    return web.json_response(_finite(data))
 
 
 def _error(status: int, message: str) -> web.Response:
@@ -263,7 +286,23 @@ def _time_arg(request, name: str, default: float) -> float:
     return v
 
 
+def _check_origin(request) -> None:
+    """Refuses a request made by another site's page (a browser sends its Origin): only
+    the page this server serves may command the rover."""
+    origin = request.headers.get("Origin")
+    if origin is None:  # not from a browser page (curl, Python, tests)
+        return
+    host = request.headers.get("Host", "")
+    if origin.split("://", 1)[-1] != host:
+        raise _HttpError(403, f"requests from {origin} are refused; use the page at "
+                              f"http://{host}/")  # fmt: skip
+
+
 async def _json_body(request) -> dict:
+    _check_origin(request)
+    if request.content_type != "application/json":
+        raise _HttpError(415, f"the body must be JSON (Content-Type: application/json), not "
+                              f"{request.content_type!r}")  # fmt: skip
     try:
         body = await request.json()
     except (json.JSONDecodeError, UnicodeDecodeError):
@@ -302,6 +341,7 @@ def make_app(mc: MissionControl) -> web.Application:
                                 end_s=(end - mc.epoch_ms) / 1000.0)  # fmt: skip
         if request.query.get("strategy") == "latest":
             rows = rows[-1:]
+        # the store holds finite values only
         return web.json_response([{"id": key, "timestamp": mc.ms(t), "value": v} for t, v in rows])
 
     async def map_state(request):
@@ -311,7 +351,7 @@ def make_app(mc: MissionControl) -> web.Application:
         cm = None
         if mc.costmap is not None:
             cm = {k: v for k, v in mc.costmap.items() if k != "png"}
-        return web.json_response({
+        return _finite_json({
             "extent_m": mc.info.get("extent_m"), "goals": m.goals, "plan": m.path,
             "plan_seq": m.plan_seq, "heat_layers": {k: v[1] for k, v in HEAT_LAYERS.items()},
             "track": track, "science": m.science, "costmap": cm,
@@ -345,17 +385,19 @@ def make_app(mc: MissionControl) -> web.Application:
 
     async def preview(request):
         body = await _json_body(request)
-        goal = parse_command({"action": "goal", **(body if isinstance(body, dict) else {})})
+        goal = parse_command({**(body if isinstance(body, dict) else {}), "action": "goal"})
         reply = await mc.request("preview", x_m=goal["x_m"], y_m=goal["y_m"])
         if not reply.get("ok"):
             raise _HttpError(400, reply.get("error", "refused"))
         return web.json_response({"ok": True, "path": reply["path"]})
 
     async def end(request):
+        _check_origin(request)
         await mc.request("end")
         return web.json_response({"ok": True})
 
     async def realtime(request):
+        _check_origin(request)
         ws = web.WebSocketResponse(heartbeat=20.0, max_msg_size=64 * 1024)
         await ws.prepare(request)
         client = _Client(ws)
@@ -370,6 +412,7 @@ def make_app(mc: MissionControl) -> web.Application:
                 await ws.send_str(json.dumps(payload))
 
         task = asyncio.create_task(writer())
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
         try:
             async for msg in ws:
                 if msg.type != WSMsgType.TEXT:

@@ -245,7 +245,19 @@
   }
 
   async function start(openmct) {
-    const [info, dict] = await Promise.all([api('/api/info'), api('/api/dictionary')]);
+    let info = await api('/api/info');
+    if (info.state === 'waiting') {
+      const note = document.createElement('div');
+      note.id = 'lunar-missing';
+      note.textContent = 'The mission is being built (site, world model); the page opens when it runs...';
+      document.body.append(note);
+      while (info.state === 'waiting') {
+        await new Promise((r) => setTimeout(r, 1000));
+        info = await api('/api/info');
+      }
+      note.remove();
+    }
+    const dict = await api('/api/dictionary');
     const realtime = new Realtime();
     window.lunarRealtime = realtime;
     openmct.setAssetPath('/openmct');
