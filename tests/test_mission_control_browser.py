@@ -100,13 +100,10 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
         # the NSS heat layer has samples to draw
         page.wait_for_function("() => (window.lunarMap.state.science.nss_weh || []).length > 0",
                                timeout=90_000)  # fmt: skip
-        # the picture for the docs once the goal is reached (or a minute on)
-        try:
-            page.wait_for_function(
-                "() => (window.lunarMap.state.goals || []).some((g) => g[2] === 'reached')",
-                timeout=60_000)  # fmt: skip
-        except Exception:  # a slow machine: take the picture as it is
-            pass
+        # the goal is driven to (the ground's judgement on the downlinked estimate)
+        page.wait_for_function(
+            "() => (window.lunarMap.state.goals || []).some((g) => g[2] === 'reached')",
+            timeout=180_000)  # fmt: skip
         page.wait_for_timeout(1500)
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOTS / "live.png"))
@@ -114,7 +111,7 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
     assert not errors, errors
     state = _get(url + "api/map")
     goal = [g for g in state["goals"] if abs(g[0] - 3.0) < 0.2 and abs(g[1]) < 0.2]
-    assert goal and goal[0][2] in ("active", "reached")
+    assert goal and goal[0][2] == "reached"
     _post(url + "api/end", {})
     assert proc.wait(120) == 0
     scenario = (out / "scenario.yaml").read_text()

@@ -165,13 +165,28 @@ class LiveObserver:
                     apply_command(run.operator, root, cmd)
                     t_up = next_tick_s(now, run.scenario.ground.rate_hz)
                     self.actions.append(as_action(cmd, t_s=t_up))
-                    self._reply(rid, ok=True, t_s=t_up, command=cmd)
+                    self._reply(rid, ok=True, t_s=t_up, command=cmd,
+                                warning=self._safed_warning(run, root, cmd))  # fmt: skip
                 else:
                     self._reply(rid, ok=False, error=f"unknown request {op!r}")
             except LunarDrakeError as exc:
                 self._reply(rid, ok=False, error=str(exc))
             except Exception as exc:  # a request must never end the mission
                 self._reply(rid, ok=False, error=f"{type(exc).__name__}: {exc}")
+
+    def _safed_warning(self, run, root, cmd) -> str:
+        """A warning for a drive command while the newest telemetry says safed."""
+        from lunar_drake.autonomy.commands import MODES, SAFE_REASONS
+
+        packet = run.operator.operator_state(root).packet
+        if packet is None or cmd["action"] not in ("goal", "drive_arc"):
+            return ""
+        mode = int(packet[TELEMETRY_FIELDS.index("mode")])
+        if MODES[mode] != "safed":
+            return ""
+        why = SAFE_REASONS[int(packet[TELEMETRY_FIELDS.index("safe_reason")])]
+        return (f"the rover reports safed ({why}): it ignores driving until a resume "
+                "(the ground resumes on its own when auto_resume allows)")
 
     def _reply(self, rid, **kw) -> None:
         self.outbox.put({"kind": "reply", "id": rid, **kw})

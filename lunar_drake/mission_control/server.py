@@ -381,7 +381,8 @@ def make_app(mc: MissionControl) -> web.Application:
         if not reply.get("ok"):
             raise _HttpError(400, reply.get("error", "refused"))
         return web.json_response({"ok": True, "command": reply["command"],
-                                  "queued_at_ms": mc.ms(reply["t_s"]), "t_s": reply["t_s"]})
+                                  "queued_at_ms": mc.ms(reply["t_s"]), "t_s": reply["t_s"],
+                                  "warning": reply.get("warning", "")})  # fmt: skip
 
     async def preview(request):
         body = await _json_body(request)

@@ -179,7 +179,7 @@
         this.pendingGoal = { x: p.x, y: p.y, sentPlanSeq: this.state ? this.state.plan_seq : -1, t: r.t_s };
         this.preview = null;
         this.cancelBtn.hidden = true;
-        this.setStatus(`goal (${p.x.toFixed(1)}, ${p.y.toFixed(1)}) m sent at t = ${r.t_s.toFixed(1)} s; going up the uplink...`);
+        this.setStatus(`goal (${p.x.toFixed(1)}, ${p.y.toFixed(1)}) m sent at t = ${r.t_s.toFixed(1)} s; going up the uplink...` + (r.warning ? ` WARNING: ${r.warning}` : ''), !!r.warning);
         this.ackState = 'sent';
       } catch (err) {
         this.setStatus(`refused: ${err.message}`, true);
@@ -367,7 +367,7 @@
     async send(cmd) {
       try {
         const r = await this.ctx.post('/api/command', cmd);
-        this.note(`t=${r.t_s.toFixed(1)} s  ${cmd.action}: queued for the uplink`);
+        this.note(`t=${r.t_s.toFixed(1)} s  ${cmd.action}: queued for the uplink` + (r.warning ? `; WARNING: ${r.warning}` : ''));
       } catch (err) {
         this.note(`${cmd.action}: REFUSED: ${err.message}`);
       }
