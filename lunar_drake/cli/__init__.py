@@ -29,6 +29,9 @@ Start with:
   lunar-drake run --scenario small       a first look: seconds on 2 cores
   lunar-drake run                        the default mission (minutes; ~240 MB with
                                          its frames and Meshcat replay)
+  lunar-drake run --scenario goto --serve
+                                         a live mission: open the printed URL (Open
+                                         MCT) and drive the rover from the map
   lunar-drake <command> --help           the options of one command
 """
 
