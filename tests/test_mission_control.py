@@ -448,3 +448,17 @@ def test_bad_command_lines_get_one_line_and_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert msg in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_costmap_classes_tell_prior_unconfirmed_and_stereo_found_hazards():
+    from types import SimpleNamespace as NS
+
+    from lunar_drake.mission_control.live import COSTMAP_CLASSES, costmap_classes
+
+    inf = np.inf
+    prior = NS(cost=np.array([[1.0, inf], [1.0, 1.0]]), unconfirmed=None)
+    now = NS(cost=np.array([[inf, inf], [1.0, inf]]),
+             unconfirmed=np.array([[False, False], [False, True]]))  # fmt: skip
+    got = costmap_classes(now, prior)
+    names = [[COSTMAP_CLASSES[v] for v in row] for row in got]
+    assert names == [["lethal_stereo", "lethal_prior"], ["free", "unconfirmed"]]

@@ -199,6 +199,15 @@ class LiveObserver:
                 return st.version, st.costmap
         return 0, run.operator.prior_costmap
 
+    def _prior_costmap(self, run):
+        """The a-priori costmap on the grid of the ground's merged costmap (what stereo
+        changed shows against it)."""
+        if not hasattr(self, "_prior"):
+            gp = run.ground_system("ground.perception")
+            self._prior = (gp.costmap_output.Allocate().get_value()[1] if gp is not None
+                           else run.operator.prior_costmap)  # fmt: skip
+        return self._prior
+
     def _preview(self, run, root, x: float, y: float) -> list:
         """The path the ground would plan to (x, y) from its estimate now."""
         from lunar_drake.autonomy.operations import goal_shift_limit_m
@@ -261,7 +270,7 @@ class LiveObserver:
             if costmap is not None and version != self._costmap_version:
                 self._costmap_version = version
                 self._next_costmap = now + self.costmap_period_s
-                cls = costmap_classes(costmap, run.operator.prior_costmap)
+                cls = costmap_classes(costmap, self._prior_costmap(run))
                 res = costmap.resolution_m
                 extra["costmap"] = {
                     "version": int(version), "classes": list(COSTMAP_CLASSES),
