@@ -3,6 +3,7 @@ defaults shown), ``./lunar.sh --help`` (usage without set-up), the ``scenarios``
 listing, the line printed before a run, and the console's goal line."""
 
 import argparse
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -133,7 +134,9 @@ def test_the_line_before_a_run_gives_time_size_and_a_first_look():
     text = describe_estimate(default, meshcat=True, out=Path("runs/default"))
     assert f"simulates {default.simulation_duration:g} s with the stereo cameras" in text
     assert "min on 2 cores" in text and "meshcat.html ~" in text and "frames/ ~" in text
-    assert "--scenario small" in text
+    assert "--scenario small" in text and "run.mcap ~" in text
+    paced = describe_estimate(default, meshcat=True, out=Path("runs/default"), rate=1.0)
+    assert f"about {math.ceil(default.simulation_duration / 60)} min" in paced  # 1x real time
     small, _ = resolve_run_scenario(_run_args(scenario="small"))
     text = describe_estimate(small, meshcat=False, out=Path("runs/small"))
     assert "under a minute" in text and "--scenario small" not in text

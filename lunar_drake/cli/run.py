@@ -17,6 +17,9 @@ REALTIME_FACTOR = {"cameras": (1.2, 2.0), "no_cameras": (6.0, 10.0)}
 #: Bytes per pixel of one camera's saved frame (16-bit raw PNG + 8-bit preview PNG of
 #: the noisy 12-bit codes): 1.5-1.9 measured on default-site frames at 640 x 480.
 FRAME_BYTES_PER_PX = 1.7
+#: Bytes per pixel of one received stereo frame in run.mcap (the left preview as JPEG,
+#: quality 85): 1.1 MB for 16 frames at 640 x 480 on the default site.
+MCAP_BYTES_PER_PX = 0.23
 #: Meshcat's static replay (meshcat.html): a base (the rover's meshes, the page), bytes
 #: per terrain mesh vertex (``terrain_view.max_mesh_px`` squared) and per simulated
 #: second of recording; fitted to the default scenario (10 s: 11.0 MB, 40 s: 14.6 MB)
@@ -26,28 +29,36 @@ MESHCAT_BYTES_PER_VERTEX = 50.0
 MESHCAT_BYTES_PER_S = 1.2e5
 
 
-def run_estimate(scenario, *, meshcat: bool) -> dict:
+def run_estimate(scenario, *, meshcat: bool, rate: float | None = None) -> dict:
     """What a run of ``scenario`` will cost, roughly, before it starts: ``minutes``
-    (low, high) on a 2-core machine (:data:`REALTIME_FACTOR`), ``frames_bytes`` (the
-    saved stereo frames), ``meshcat_bytes`` (the static replay, 0 without Meshcat) and
-    ``total_bytes``. An estimate from constants measured here, not a promise."""
+    (low, high) on a 2-core machine (:data:`REALTIME_FACTOR`; no less than the paced
+    duration at ``rate`` x real time), ``frames_bytes`` (the saved stereo frames),
+    ``mcap_bytes`` (their JPEGs in ``run.mcap``), ``meshcat_bytes`` (the static replay, 0
+    without Meshcat) and ``total_bytes``. An estimate from constants measured here, not
+    a promise."""
     cam = scenario.sensors.camera
     duration = float(scenario.simulation_duration)
     rtf = REALTIME_FACTOR["cameras" if cam.enabled else "no_cameras"]
-    frames = 0.0
+    frames = mcap = 0.0
     if cam.enabled and scenario.logging.save_frames:
         n = math.floor(duration * cam.rate_hz) + 1  # t = 0 and every period
         frames = n * 2 * cam.width * cam.height * FRAME_BYTES_PER_PX
+        mcap = n * cam.width * cam.height * MCAP_BYTES_PER_PX
     html = 0.0
     if meshcat:
         px = scenario.terrain_view.max_mesh_px
         html = MESHCAT_BASE_BYTES + MESHCAT_BYTES_PER_VERTEX * px * px
         html += MESHCAT_BYTES_PER_S * duration
+    lo, hi = duration / rtf[1] / 60.0, duration / rtf[0] / 60.0
+    if rate:
+        paced = duration / rate / 60.0
+        lo, hi = max(lo, paced), max(hi, paced)
     return {
-        "minutes": (duration / rtf[1] / 60.0, duration / rtf[0] / 60.0),
+        "minutes": (lo, hi),
         "frames_bytes": frames,
+        "mcap_bytes": mcap,
         "meshcat_bytes": html,
-        "total_bytes": frames + html,
+        "total_bytes": frames + mcap + html,
     }
 
 
@@ -56,20 +67,23 @@ def _minutes(lo: float, hi: float) -> str:
         return "under a minute"
     if lo < 1.0:
         return f"up to {math.ceil(hi)} min"
+    if round(lo) >= math.ceil(hi) - 1:
+        return f"about {math.ceil(hi)} min"
     return f"roughly {round(lo)}-{math.ceil(hi)} min"
 
 
-def describe_estimate(scenario, *, meshcat: bool, out: Path) -> str:
+def describe_estimate(scenario, *, meshcat: bool, out: Path, rate: float | None = None) -> str:
     """What is printed before a run: simulated time, cameras, the estimated wall time
-    and disk use, and, for a long or large run, a second line on where to start
-    instead."""
-    e = run_estimate(scenario, meshcat=meshcat)
+    (paced at ``rate`` x real time when given) and disk use, and, for a long or large
+    run, a second line on where to start instead."""
+    e = run_estimate(scenario, meshcat=meshcat, rate=rate)
     cam = scenario.sensors.camera.enabled
     parts = []
     if e["meshcat_bytes"]:
         parts.append(f"meshcat.html ~{e['meshcat_bytes'] / 1e6:.0f} MB")
     if e["frames_bytes"]:
         parts.append(f"frames/ ~{e['frames_bytes'] / 1e6:.0f} MB")
+        parts.append(f"run.mcap ~{e['mcap_bytes'] / 1e6:.0f} MB")
     size = f"about {e['total_bytes'] / 1e6:.0f} MB" if parts else "a few MB"
     detail = f" ({', '.join(parts)})" if parts else ""
     text = (
@@ -254,7 +268,8 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
     from lunar_drake.simulation import simulate
     from lunar_drake.site import load_site
 
-    print(describe_estimate(scenario, meshcat=not args.no_meshcat, out=out), flush=True)
+    print(describe_estimate(scenario, meshcat=not args.no_meshcat, out=out, rate=rate),
+          flush=True)  # fmt: skip
     for line in (map_line(scenario), calibration_line(scenario)):
         if line:
             print(line, flush=True)

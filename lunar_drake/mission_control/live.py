@@ -254,6 +254,9 @@ class LiveObserver:
             )
             datums += dic.ground_pose_datums(now, pose)
             extra["ground_pose"] = (now, [float(v) for v in pose])
+            # states that change seldom, repeated so a display opened later has them
+            datums += dic.goal_datums(now, ops.status)
+            datums.append(("cw.loss_of_signal", now, int(self._conv.los)))
         goals = (ops.goals, ops.status)
         if goals != self._goals:
             self._goals = goals
