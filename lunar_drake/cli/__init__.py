@@ -59,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     sigint = interrupts.LatchedSigint()
+    hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_interrupts(hook)
     try:
         return args.func(args)
     except LunarDrakeError as exc:
@@ -76,6 +78,20 @@ def main(argv: list[str] | None = None) -> int:
         raise
     finally:
         sigint.restore()
+        sys.unraisablehook = hook
+
+
+def _quiet_interrupts(hook):
+    """An unraisable hook that stays silent for a Ctrl-C or SIGTERM that landed in a
+    finalizer (numba's llvmlite objects are collected mid-build): the interrupt is
+    latched and reported once; anything else goes to ``hook``."""
+
+    def quiet(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            return
+        hook(unraisable)
+
+    return quiet
 
 
 def _interrupted(terminated: bool = False) -> int:
