@@ -441,6 +441,8 @@ def test_bad_command_lines_get_one_line_and_exit_2(tmp_path, capsys):
         (["run", "--scenario", "small", "--rate", "-1", "--out", str(tmp_path / "a")], "--rate"),
         (["run", "--scenario", "small", "--serve", "--port", "70000", "--no-meshcat",
           "--out", str(tmp_path / "b")], "--port 70000"),
+        (["run", "--scenario", "small", "--serve", "--foxglove-port", "-5", "--no-meshcat",
+          "--out", str(tmp_path / "c")], "--foxglove-port -5"),
         (["serve", str(tmp_path)], "not a run directory"),
         (["export-mcap", str(tmp_path / "nope")], "not a run directory"),
     ]:  # fmt: skip

@@ -207,7 +207,10 @@ def command(args) -> int:
         from lunar_drake.mission_control.process import ServerProcess
 
         check_port(args.port)
-        foxglove = None if args.foxglove_port < 0 else check_port(args.foxglove_port)
+        if args.foxglove_port < -1:
+            raise ConfigError(f"--foxglove-port {args.foxglove_port} must be -1 (none) or in "
+                              "[0, 65535]")  # fmt: skip
+        foxglove = None if args.foxglove_port == -1 else check_port(args.foxglove_port)
         server = ServerProcess(host=args.host or "127.0.0.1", port=args.port,
                                allow_remote=args.host is not None,
                                foxglove_port=foxglove)  # fmt: skip
