@@ -5,7 +5,7 @@
 1. **Live latency and pacing.** ``lunar-drake run --serve --rate 1`` on the ``goto``
    site without cameras, telemetry at 10 Hz, for ``--duration`` simulated seconds
    (default 600: ten minutes); ``--clients`` (10) WebSocket clients each subscribe to
-   every point of the dictionary. Latency of a telemetry datum (``rover.*``, ``link.*``:
+   every point of the dictionary. Latency of a telemetry datum (``PACKET_KEYS``:
    those stamped with a packet's delivery) = its arrival at a client minus the
    wall time at which the paced mission's ground software took the packet in (its
    receiver's tick after the link delivered it: the batch's publish time less the
@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from lunar_drake.files import atomic_write_text, check_output_file
+from lunar_drake.mission_control.dictionary import PACKET_KEYS
 
 try:
     from benchmarks.speed_index import measure_speed_index, speed_index_line
@@ -96,7 +97,7 @@ async def _clients(url: str, n: int, keys: list[str], rate: float, done) -> list
                 wall, sim = data["wall"], data["sim_s"]
                 transfer.append(now - wall)
                 for d in data["datums"]:
-                    if not d["id"].startswith(("rover.", "link.")):
+                    if d["id"] not in PACKET_KEYS:
                         continue  # stamped at the ground's tick, not a packet's delivery
                     t = (d["timestamp"] - epoch) / 1000.0  # the link's delivery (sim s)
                     t_in = math.ceil(t * tick_hz - 1e-6) / tick_hz  # the ground's intake

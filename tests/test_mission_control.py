@@ -66,9 +66,79 @@ def test_every_datum_has_a_dictionary_point_and_units():
                                          packet=_packet(soc=0.9, array_W=100.0))}  # fmt: skip
     keys |= {k for k, _, _ in conv.packet(seq=1, t_sent=1.0, t_received=2.0,
                                           packet=_packet(x_m=0.2, vx_cmd_mps=0.2))}  # fmt: skip
+    keys |= {k for k, _, _ in conv.packet(seq=2, t_sent=2.0, t_received=3.0,
+                                          packet=_packet(x_m=0.35, vx_cmd_mps=0.2))}  # fmt: skip
+    assert keys == dic.PACKET_KEYS | {"cw.safed", "cw.uplink_loss", "cw.low_soc"}
     keys |= {k for k, _, _ in dic.ground_pose_datums(1.0, [0, 0, 0, 0, 0, 0.1])}
     assert keys <= set(dic.BY_KEY)
     assert all(p.units or p.format in ("enum", "int", "string") for p in dic.POINTS)
+
+
+def test_operator_and_keyframe_datums_follow_the_ground_state():
+    import types
+
+    from lunar_drake.perception.ground_pipeline import KeyframeRecord
+
+    ops = types.SimpleNamespace(active=0, replans=1, resends=0, resumes=2, next_seq=5,
+                                packet=_packet(command_seq=2), t_received=9.0,
+                                goals=((3.0, 4.0), (9.0, 9.0)),
+                                path=((0.0, 0.0), (3.0, 0.0), (3.0, 4.0)))  # fmt: skip
+    d = {k: v for k, _, v in dic.operator_datums(10.0, ops, (0.0, 0.0, 0.0, 0, 0, 0))}
+    assert d["ground.active_goal"] == 1 and d["ground.replans"] == 1
+    assert d["ground.auto_resumes"] == 2 and d["link.commands_sent"] == 5
+    assert d["link.uplink_queue"] == 2  # seqs 3 and 4 not handled yet
+    assert d["link.packet_age"] == pytest.approx(1.0)
+    assert d["ground.goal_distance"] == pytest.approx(5.0)
+    assert d["ground.plan_left"] == pytest.approx(7.0)  # 3 m east, then 4 m north
+    ops.active, ops.path, ops.packet = -1, (), None
+    d = {k: v for k, _, v in dic.operator_datums(10.0, ops, (0.0, 0.0, 0.0, 0, 0, 0))}
+    assert d["ground.active_goal"] == 0 and d["link.uplink_queue"] == 5
+    assert "ground.goal_distance" not in d and "ground.plan_left" not in d
+
+    def rec(vo, lethal):
+        nan = math.nan
+        return KeyframeRecord(1.0, 1, 10, vo, "", nan, nan, nan, nan, nan, nan, 0.0, 0.0,
+                              0.0, 0.1, lethal)  # fmt: skip
+
+    kc = dic.KeyframeCounter()
+    kc.datums(1.0, [rec("none", 3)], sigma_m=0.0, version=1)
+    d = {k: v for k, _, v in kc.datums(2.0, [rec("accepted", 0), rec("gated", 2),
+                                             rec("rejected", 0)], sigma_m=0.2, version=2)}
+    assert (d["ground.keyframes"], d["ground.vo_accepted"], d["ground.vo_rejected"],
+            d["ground.stereo_lethal"], d["ground.map_version"]) == (4, 1, 2, 5, 2)
+    assert d["ground.sigma"] == 0.2
+
+
+def test_the_earth_is_predicted_behind_a_ridge_of_the_ground_map(cache):
+    """A ring ridge 10 m high, 49-51 m from the rover, on a flat map: the horizon rises
+    to atan((10 - 1) / 49) = 10.4 deg (antenna 1 m up) in every azimuth, so the
+    predicted margin is the Earth's elevation less that; the flat map's horizon sits
+    at its edge, 0.4-0.6 deg below the level (the antenna's 1 m over 100-141 m)."""
+    import types
+
+    from lunar_drake.mission_control.sky import SkyPrediction
+    from lunar_drake.scenario_files import load_scenario
+
+    sc = load_scenario(scenario_name="goto")
+    res, n = 0.5, 400  # 200 m square, centred on the rover
+    xs = (np.arange(n) + 0.5) * res - 100.0
+    r = np.hypot(*np.meshgrid(xs, xs))
+    flat = np.zeros((n, n))
+    ridge = np.where((r >= 49.0) & (r <= 51.0), 10.0, 0.0)
+
+    def margin(z, pose=(0.0, 0.0)):
+        mp = types.SimpleNamespace(z=z, resolution_m=res, x0_m=-100.0, y1_m=100.0)
+        d = {k: v for k, _, v in SkyPrediction(scenario=sc, map_product=mp).datums(0.0, pose)}
+        return d
+
+    d = margin(ridge)
+    el = d["sky.earth_elevation"]
+    assert d["sky.earth_margin"] == pytest.approx(el - math.degrees(math.atan(9.0 / 49.0)),
+                                                  abs=0.15)  # fmt: skip
+    assert d["cw.earth_below_horizon"] == int(d["sky.earth_margin"] <= 0.0)
+    flat_margin = margin(flat)["sky.earth_margin"]
+    assert el + 0.39 < flat_margin < el + 0.6
+    assert "sky.earth_margin" not in margin(flat, pose=(500.0, 0.0))  # off the map
 
 
 def test_science_records_become_datums_and_heat_samples_at_the_estimate():
@@ -198,6 +268,34 @@ def test_history_dictionary_and_json_errors():
     _with_client(mc, body)
 
 
+def test_the_instructor_overlay_is_off_unless_asked_and_never_telemetry():
+    """Truth reaches the map only with ``instructor`` set (``run --serve --instructor``);
+    without it a truth message is dropped, and truth is never a telemetry point."""
+
+    def map_after(instructor):
+        mc = MissionControl()
+        mc.set_site({"kind": "site", "epoch_utc": "2027-11-15T00:00:00", "name": "t",
+                     "extent_m": [-10, 10, -10, 10], "hillshade_png": b"\x89PNG",
+                     "instructor": instructor})  # fmt: skip
+        for t in (1.0, 2.0):
+            mc.ingest({"kind": "batch", "t_s": t, "datums": [("ground.x", t, t)],
+                       "truth_pose": [t, 0.9 * t, 0.1, 0.0]})  # fmt: skip
+        got = {}
+
+        async def body(c):
+            got.update(await (await c.get("/api/map")).json())
+
+        _with_client(mc, body)
+        return got, mc
+
+    off, mc = map_after(False)
+    assert off["instructor"] is None and mc.store.map.truth == []
+    on, mc = map_after(True)
+    assert on["instructor"]["track"] == [[0.9, 0.1], [1.8, 0.1]]
+    assert on["instructor"]["rover"] == [1.8, 0.1, 0.0]
+    assert not any(k.startswith("truth") for k in dic.BY_KEY)
+
+
 def test_realtime_subscribers_get_their_points_and_bad_messages_leave_the_socket_open():
     mc = _replay_mc()
 
@@ -294,7 +392,7 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     scenario = _live_scenario(cache)
     site = load_site(scenario, progress=False)
     outbox, inbox = queue.Queue(), queue.Queue()
-    obs = LiveObserver(outbox=outbox, inbox=inbox)
+    obs = LiveObserver(outbox=outbox, inbox=inbox, instructor=True)
     script = _Scripted(inbox, [
         (1.0, {"id": 1, "op": "preview", "x_m": 3.0, "y_m": 0.0}),
         (1.0, {"id": 2, "op": "command", "command": {"action": "goal", "x_m": 3.0, "y_m": 0.0}}),
@@ -318,6 +416,9 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     while not outbox.empty():
         msgs.append(outbox.get())
     assert msgs[0]["kind"] == "site" and msgs[0]["hillshade_png"][:4] == b"\x89PNG"
+    assert msgs[0]["instructor"] is True
+    truth_msgs = [m["truth_pose"] for m in msgs if "truth_pose" in m]
+    assert len(truth_msgs) >= 20 and truth_msgs[-1][1] > truth_msgs[0][1] + 0.5
     replies = {m["id"]: m for m in msgs if m["kind"] == "reply"}
     assert replies[1]["ok"] and len(replies[1]["path"]) >= 2
     assert replies[1]["path"][-1] == pytest.approx([3.0, 0.0])
@@ -329,8 +430,31 @@ def test_a_command_from_the_network_is_driven_and_scenario_yaml_reproduces_the_r
     assert logs.ground_goals and logs.ground_goals[0][0] == (3.0, 0.0)
     truth = logs.vectors["truth.pose"]
     assert truth.data[-1, 0] - truth.data[0, 0] > 0.5
-    keys = {d[0] for m in msgs if m["kind"] == "batch" for d in m["datums"]}
-    assert {"rover.x", "link.delay", "ground.x", "ground.event", "mission.time"} <= keys
+    datums = [d for m in msgs if m["kind"] == "batch" for d in m["datums"]]
+    keys = {d[0] for d in datums}
+    assert {"rover.x", "link.delay", "ground.x", "ground.event", "mission.time",
+            "ground.active_goal", "ground.goal_distance", "ground.plan_left",
+            "link.uplink_queue", "link.packet_age", "sky.earth_elevation",
+            "sky.earth_margin", "cw.earth_below_horizon"} <= keys  # fmt: skip
+    assert keys <= set(dic.BY_KEY)
+
+    def series(key):
+        return [(t, v) for k, t, v in datums if k == key]
+
+    # the goal went up at 1.1 s and was handled after the uplink's delay: the queue
+    # rose to 1 and fell back to 0; goal 1 was active and its distance shrank
+    queue_ = series("link.uplink_queue")
+    assert max(v for _, v in queue_) >= 1 and queue_[-1][1] == 0
+    assert any(v == 1 for _, v in series("ground.active_goal"))
+    dist = [v for _, v in series("ground.goal_distance")]
+    assert dist and min(dist) < dist[0] - 0.3
+    # the sky is predicted from the epoch: the Earth's elevation matches SPICE's own
+    from lunar_drake.ephemeris.sun_earth import SiteLocation, sun_earth_enu
+
+    _, el = series("sky.earth_elevation")[-1]
+    ref = sun_earth_enu(utc=scenario.site.epoch_utc, site=SiteLocation(
+        scenario.site.latitude_deg, scenario.site.longitude_deg))  # fmt: skip
+    assert el == pytest.approx(float(ref.earth_elevation_deg), abs=0.01)  # 12 s later
     assert any("plan" in m and m["plan"]["path"] for m in msgs if m["kind"] == "batch")
     # the same scenario with the command written down as ground.actions: same run
     again = with_actions(scenario, sorted([*obs.actions, *controls.actions],

@@ -215,7 +215,8 @@ def command(args) -> int:
                                allow_remote=args.host is not None,
                                foxglove_port=foxglove)  # fmt: skip
         observer = LiveObserver(outbox=server.outbox, inbox=server.inbox,
-                                alive=server.process.is_alive)  # fmt: skip
+                                alive=server.process.is_alive,
+                                instructor=args.instructor)  # fmt: skip
         print(f"Mission control: {server.url} (the run is paced to {rate:g}x real time; "
               "the page's End button ends it early and writes it)", flush=True)  # fmt: skip
         if foxglove is not None:
@@ -498,6 +499,10 @@ def add_parser(sub) -> None:
     r.add_argument("--foxglove-port", type=int, default=8765,
                    help="with --serve, the foxglove-sdk live WebSocket server's port "
                         "(default 8765; -1: none)")  # fmt: skip
+    r.add_argument("--instructor", action="store_true",
+                   help="with --serve, add the instructor overlay: the rover's TRUE track "
+                        "on the site map, marked as truth (off by default: the page shows "
+                        "only what the ground received)")  # fmt: skip
     r.add_argument("--rate", type=float, default=None,
                    help="pace the run to this multiple of real time (default: 1 with "
                         "--serve, else as fast as it can; 0: as fast as it can)")  # fmt: skip

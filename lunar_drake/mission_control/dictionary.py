@@ -43,6 +43,7 @@ CAUTIONS = {
     "cw.uplink_loss": "Uplink loss (safed on board)",
     "cw.loss_of_signal": "No telemetry for 3 periods (LOS: Earth below the horizon or link)",
     "cw.low_soc": "Low state of charge",
+    "cw.earth_below_horizon": "Earth predicted below the horizon (ground's map; LOS expected)",
 }
 
 POINTS: tuple[Point, ...] = (
@@ -56,6 +57,7 @@ POINTS: tuple[Point, ...] = (
     Point("rover.speed", "Speed (from the downlinked estimates)", "m/s"),
     Point("rover.slip", "Estimated slip (1 - speed / commanded)", "%"),
     Point("rover.cmd_vx", "Commanded speed", "m/s"),
+    Point("rover.cmd_vy", "Commanded sideways speed (crab)", "m/s"),
     Point("rover.cmd_wz", "Commanded turn rate", "deg/s"),
     Point("rover.brake", "Brakes", "", "enum", ("released", "applied")),
     Point("rover.mode", "Mode", "", "enum", MODES),
@@ -68,9 +70,32 @@ POINTS: tuple[Point, ...] = (
     Point("link.delay", "Telemetry latency (sent to received)", "s", group="link"),
     Point("link.lost", "Telemetry packets lost (seq gaps)", "", "int", group="link"),
     Point("link.received", "Telemetry packets received", "", "int", group="link"),
+    Point("link.packet_age", "Age of the newest telemetry packet", "s", group="link"),
+    Point("link.commands_sent", "Commands sent up", "", "int", group="link"),
+    Point("link.uplink_queue", "Commands sent, not yet handled on board", "", "int",
+          group="link"),
+    Point("link.frames", "Stereo frames received", "", "int", group="link"),
+    Point("link.frame_delay", "Stereo frame latency (capture to received)", "s", group="link"),
     Point("ground.x", "Ground estimate x (with VO)", "m", group="ground"),
     Point("ground.y", "Ground estimate y (with VO)", "m", group="ground"),
+    Point("ground.z", "Ground estimate height change", "m", group="ground"),
     Point("ground.yaw", "Ground estimate heading", "deg", group="ground"),
+    Point("ground.sigma", "Ground position sigma (per axis, since the first keyframe)", "m",
+          group="ground"),
+    Point("ground.keyframes", "Stereo keyframes processed", "", "int", group="ground"),
+    Point("ground.vo_accepted", "VO alignments fused", "", "int", group="ground"),
+    Point("ground.vo_rejected", "VO alignments rejected or gated", "", "int", group="ground"),
+    Point("ground.stereo_lethal", "Costmap cells stereo made lethal", "", "int",
+          group="ground"),
+    Point("ground.map_version", "Costmap version", "", "int", group="ground"),
+    Point("ground.active_goal", "Goal being driven (1-based; 0 none)", "", "int",
+          group="ground"),
+    Point("ground.goal_distance", "Ground estimate to the active goal", "m", group="ground"),
+    Point("ground.plan_left", "Planned path left to drive", "m", group="ground"),
+    Point("ground.replans", "Replans of the active goal", "", "int", group="ground"),
+    Point("ground.resends", "Gotos sent again for want of an acknowledgement", "", "int",
+          group="ground"),
+    Point("ground.auto_resumes", "Automatic resumes", "", "int", group="ground"),
     Point("ground.goals_reached", "Goals reached (ground's judgement)", "", "int", group="ground"),
     Point("ground.goals", "Goals given", "", "int", group="ground"),
     Point("ground.event", "Ground event", "", "string", group="ground"),
@@ -80,10 +105,20 @@ POINTS: tuple[Point, ...] = (
     Point("nirvss.ice", "NIRVSS ice band depth", "-", group="science"),
     Point("nirvss.oh", "NIRVSS OH band depth", "-", group="science"),
     Point("lcs.temperature", "LCS surface temperature", "K", group="science"),
+    Point("sky.sun_elevation", "Sun elevation (predicted)", "deg", group="sky"),
+    Point("sky.sun_azimuth", "Sun azimuth from true north (predicted)", "deg", group="sky"),
+    Point("sky.earth_elevation", "Earth elevation (predicted)", "deg", group="sky"),
+    Point("sky.earth_azimuth", "Earth azimuth from true north (predicted)", "deg", group="sky"),
+    Point("sky.earth_margin", "Earth above the map's horizon at the ground's estimate "
+          "(predicted)", "deg", group="sky"),
     *(Point(k, n, "", "enum", ("nominal", "ACTIVE"), group="cw") for k, n in CAUTIONS.items()),
 )
 
 BY_KEY = {p.key: p for p in POINTS}
+#: The points stamped with a telemetry packet's reception (:meth:`Converter.packet`);
+#: the others are stamped at the ground's tick or a product's reception.
+PACKET_KEYS = frozenset({k for k in BY_KEY if k.startswith("rover.")}
+                        | {"link.delay", "link.lost", "link.received"})  # fmt: skip
 _F = {name: k for k, name in enumerate(TELEMETRY_FIELDS)}
 
 
@@ -116,6 +151,7 @@ class Converter:
             ("rover.pitch", t, deg(p[_F["pitch_rad"]])),
             ("rover.yaw", t, deg(p[_F["yaw_rad"]])),
             ("rover.cmd_vx", t, float(p[_F["vx_cmd_mps"]])),
+            ("rover.cmd_vy", t, float(p[_F["vy_cmd_mps"]])),
             ("rover.cmd_wz", t, deg(p[_F["wz_cmd_radps"]])),
             ("rover.brake", t, int(p[_F["brake"]] > 0.5)),
             ("rover.mode", t, int(p[_F["mode"]])),
@@ -169,7 +205,65 @@ def ground_pose_datums(t_s: float, pose) -> list:
     """Datums of the ground's pose estimate (x, y, z, roll, pitch, yaw; m, rad) at ``t_s``."""
     t = float(t_s)
     return [("ground.x", t, float(pose[0])), ("ground.y", t, float(pose[1])),
+            ("ground.z", t, float(pose[2])),
             ("ground.yaw", t, math.degrees(float(pose[5])))]  # fmt: skip
+
+
+def _tel(packet, name: str, default: float = math.nan) -> float:
+    return default if packet is None else float(np.asarray(packet)[_F[name]])
+
+
+def operator_datums(t_s: float, ops, pose) -> list:
+    """Datums of the ground operator's state ``ops`` (an
+    :class:`~lunar_drake.autonomy.operations.OperatorState`) at ``t_s`` with the
+    ground's ``pose`` (x, y, ...; m): goal driving, replans, the uplink's commands."""
+    t = float(t_s)
+    x, y = float(pose[0]), float(pose[1])
+    out = [("ground.active_goal", t, int(ops.active) + 1),
+           ("ground.replans", t, int(ops.replans)),
+           ("ground.resends", t, int(ops.resends)),
+           ("ground.auto_resumes", t, int(ops.resumes)),
+           ("link.commands_sent", t, int(ops.next_seq))]  # fmt: skip
+    handled = _tel(ops.packet, "command_seq", -1.0)
+    out.append(("link.uplink_queue", t, max(0, int(ops.next_seq) - 1 - int(handled))))
+    if math.isfinite(ops.t_received):
+        out.append(("link.packet_age", t, max(0.0, t - float(ops.t_received))))
+    if 0 <= ops.active < len(ops.goals):
+        gx, gy = ops.goals[ops.active][:2]
+        out.append(("ground.goal_distance", t, math.hypot(float(gx) - x, float(gy) - y)))
+    if ops.path:
+        pts = np.asarray([p[:2] for p in ops.path], np.float64)
+        k = int(np.argmin(np.hypot(pts[:, 0] - x, pts[:, 1] - y)))  # nearest waypoint on
+        rest = np.vstack([[x, y], pts[k:]])
+        out.append(("ground.plan_left", t,
+                    float(np.sum(np.hypot(*np.diff(rest, axis=0).T)))))  # fmt: skip
+    return out
+
+
+@dc.dataclass
+class KeyframeCounter:
+    """Counts the ground perception's keyframes as they come (``ground.keyframes``,
+    ``ground.vo_accepted``, ``ground.vo_rejected``, ``ground.stereo_lethal``)."""
+
+    keyframes: int = 0
+    accepted: int = 0
+    rejected: int = 0
+    lethal: int = 0
+
+    def datums(self, t_s: float, new_records, *, sigma_m: float, version: int) -> list:
+        """Datums at ``t_s`` after the records ``new_records`` (KeyframeRecords)."""
+        for r in new_records:
+            self.keyframes += 1
+            self.accepted += r.vo == "accepted"
+            self.rejected += r.vo in ("rejected", "gated")
+            self.lethal += int(r.new_lethal)
+        t = float(t_s)
+        out = [("ground.keyframes", t, self.keyframes), ("ground.vo_accepted", t, self.accepted),
+               ("ground.vo_rejected", t, self.rejected), ("ground.stereo_lethal", t, self.lethal),
+               ("ground.map_version", t, int(version))]  # fmt: skip
+        if math.isfinite(sigma_m):
+            out.append(("ground.sigma", t, float(sigma_m)))
+        return out
 
 
 def event_datum(event) -> tuple:

@@ -79,13 +79,17 @@ class LiveObserver:
         costmap_period_s: the costmap is sent at most this often (s, sim time).
         alive: ``alive()`` -> whether the server is still there (None: assume so); when
             it has gone, nothing more is published and the run goes on.
+        instructor: also publish the plant's ``truth.pose`` (x, y, yaw) every
+            ``pose_period_s`` for the instructor overlay (an oracle, marked so on the
+            page; never in the telemetry dictionary or to the ground).
     """
 
     def __init__(self, *, outbox, inbox, frame_width_px: int = 320,
                  pose_period_s: float = 0.5, costmap_period_s: float = 2.0,
-                 alive=None):  # fmt: skip
+                 alive=None, instructor: bool = False):  # fmt: skip
         self.outbox, self.inbox = outbox, inbox
         self.alive, self._gone = alive, False
+        self.instructor = bool(instructor)
         self.ended_s: float | None = None
         self.frame_width_px = int(frame_width_px)
         self.pose_period_s = float(pose_period_s)
@@ -100,6 +104,9 @@ class LiveObserver:
         self._plan = None
         self._last_rx = None
         self._conv = None
+        self._sky = None
+        self._kf = dic.KeyframeCounter()
+        self._n_kf = 0
 
     # ----------------------------------------------------------------------- observer
 
@@ -130,13 +137,20 @@ class LiveObserver:
         self._conv = dic.Converter(telemetry_period_s=1.0 / sc.flight.telemetry_rate_hz,
                                    min_soc=sc.flight.safety.min_soc)  # fmt: skip
         mp = run.map_product
+        try:
+            from lunar_drake.mission_control.sky import SkyPrediction
+
+            self._sky = SkyPrediction(scenario=sc, map_product=mp)
+        except LunarDrakeError as exc:  # no ephemeris for this epoch: no sky points
+            print(f"mission control: no sky prediction ({exc})", flush=True)
         site = {"kind": "site", "epoch_utc": sc.site.epoch_utc, "name": sc.name or "",
                 "duration_s": float(sc.simulation_duration), "map_source": mp.source,
                 "extent_m": [mp.x0_m, mp.x0_m + mp.shape[1] * mp.resolution_m,
                              mp.y1_m - mp.shape[0] * mp.resolution_m, mp.y1_m],
                 "hillshade_png": png_bytes(hillshade_u8(mp.z, mp.resolution_m)),
                 "spawn_xy": [sc.rover.spawn_x_m, sc.rover.spawn_y_m],
-                "ground_rate_hz": float(sc.ground.rate_hz)}  # fmt: skip
+                "ground_rate_hz": float(sc.ground.rate_hz),
+                "instructor": self.instructor}  # fmt: skip
         self.outbox.put(site)
 
     def _handle_requests(self, run, root, now: float) -> str | None:
@@ -253,7 +267,20 @@ class LiveObserver:
                 run.mission.GetMyContextFromRoot(root)
             )
             datums += dic.ground_pose_datums(now, pose)
+            datums += dic.operator_datums(now, ops, pose)
             extra["ground_pose"] = (now, [float(v) for v in pose])
+            if (gp := run.ground_system("ground.perception")) is not None:
+                st = gp.perception_state(root)
+                new = st.records.since(self._n_kf)
+                self._n_kf += len(new)
+                datums += self._kf.datums(now, new, sigma_m=st.sigma_m, version=st.version)
+            if self.instructor:  # the oracle: the page marks it as truth
+                truth = run.mission.GetOutputPort("truth.pose").Eval(
+                    run.mission.GetMyContextFromRoot(root)
+                )
+                extra["truth_pose"] = [now, float(truth[0]), float(truth[1]), float(truth[5])]
+            if self._sky is not None and self._sky.due(now):
+                datums += self._sky.datums(now, pose)
             # states that change seldom, repeated so a display opened later has them
             datums += dic.goal_datums(now, ops.status)
             datums.append(("cw.loss_of_signal", now, int(self._conv.los)))
@@ -284,7 +311,11 @@ class LiveObserver:
         if (ix := run.ground_system("ground.images")) is not None:
             got = ix.received_since(ix.GetMyContextFromRoot(root), self._n_images)
             self._n_images += len(got)
+            for d in got:
+                datums.append(("link.frame_delay", float(d.t_received_s),
+                               float(d.t_received_s - d.message.payload.t_capture_s)))
             if got:
+                datums.append(("link.frames", now, self._n_images))
                 d = got[-1]
                 f = d.message.payload
                 extra["frame"] = {"t_received_s": d.t_received_s,

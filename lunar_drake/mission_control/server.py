@@ -14,7 +14,9 @@ milliseconds, ``site.epoch_utc`` + simulation time, as Open MCT expects):
   "sim_s", "wall"}`` (the batch's simulation time and the wall time the mission
   published it) and ``{"clock": ms}``; a malformed message gets ``{"error": ...}`` and
   the socket stays.
-- ``GET /api/map``: goals, plan, track, science samples, costmap version;
+- ``GET /api/map``: goals, plan, track, science samples, costmap version; with
+  ``run --serve --instructor`` only, ``instructor``: the rover's TRUE track (an
+  oracle for instructors, drawn marked as truth; null otherwise);
   ``/api/map/hillshade.png``, ``/api/map/costmap.png``; ``/api/camera/latest.png``.
 - ``POST /api/command`` (:func:`~lunar_drake.mission_control.commands.parse_command`
   body), ``POST /api/preview`` (``{x_m, y_m}``: the path the ground would plan),
@@ -143,6 +145,8 @@ class MissionControl:
                 m.plan_seq = msg["plan"]["seq"]
             for layer, samples in msg.get("science", {}).items():
                 m.science.setdefault(layer, []).extend(samples)
+            if "truth_pose" in msg and self.info.get("instructor"):
+                m.truth.append(msg["truth_pose"])
             if "costmap" in msg:
                 self.costmap = msg["costmap"]
             if "frame" in msg:
@@ -358,6 +362,9 @@ def make_app(mc: MissionControl) -> web.Application:
             "rover": track[-1] if track else mc.info.get("spawn_xy"),
             "frame": None if mc.frame is None else {k: v for k, v in mc.frame.items()
                                                     if k != "png"},
+            "instructor": ({"track": [[x, y] for _, x, y, _ in m.truth],
+                            "rover": m.truth[-1][1:] if m.truth else None}
+                           if mc.info.get("instructor") else None),
         })  # fmt: skip
 
     def png(data: bytes | None, what: str) -> web.Response:

@@ -47,12 +47,14 @@ class MapState:
     """What the site map shows: ``goals`` ((x, y, status), ...), the planned ``path``
     ((x, y), ...) of the goto ``plan_seq``, and the science samples placed by the ground
     (``science``: heat layer -> [(x, y, value), ...]; layers of
-    :data:`~lunar_drake.mission_control.dictionary.HEAT_LAYERS`)."""
+    :data:`~lunar_drake.mission_control.dictionary.HEAT_LAYERS`) and, with the
+    instructor overlay only, the rover's ``truth`` track ((t_s, x, y, yaw), ...)."""
 
     goals: list = dc.field(default_factory=list)
     path: list = dc.field(default_factory=list)
     plan_seq: int = -1
     science: dict = dc.field(default_factory=dict)
+    truth: list = dc.field(default_factory=list)
 
 
 class TelemetryStore:

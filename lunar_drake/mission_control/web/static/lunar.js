@@ -151,7 +151,7 @@
       plot('plot.speed', 'Speed', ['rover.speed', 'rover.cmd_vx']),
       plot('plot.attitude', 'Attitude', ['rover.roll', 'rover.pitch']),
       plot('plot.slip', 'Estimated slip', ['rover.slip']),
-      plot('plot.link', 'Link', ['link.delay', 'link.lost']),
+      plot('plot.link', 'Link: delay, lost, uplink queue', ['link.delay', 'link.lost', 'link.uplink_queue']),
       plot('plot.power', 'Power', ['rover.soc', 'rover.array_power']),
       put({
         identifier: id('status'),
@@ -159,8 +159,9 @@
         type: 'LadTable',
         location: `${NS}:mission`,
         composition: ['rover.mode', 'rover.safe_reason', 'cw.safed', 'cw.uplink_loss',
-          'cw.loss_of_signal', 'cw.low_soc', 'rover.soc', 'ground.goals_reached', 'ground.goals',
-          'link.received', 'link.lost'].map(id)
+          'cw.loss_of_signal', 'cw.earth_below_horizon', 'cw.low_soc', 'rover.soc',
+          'ground.goals_reached', 'ground.goals', 'ground.sigma', 'sky.earth_margin',
+          'link.received', 'link.lost', 'link.uplink_queue'].map(id)
       }),
       put({
         identifier: id('events'),

@@ -46,6 +46,15 @@
         };
         bar.append(el('label', {}, box, ` ${name}`));
       }
+      if (ctx.info.instructor) {
+        const box = el('input', { type: 'checkbox', checked: true });
+        box.dataset.layer = 'instructor';
+        box.onchange = () => {
+          this.layers.instructor = box.checked;
+          this.draw();
+        };
+        bar.append(el('label', { className: 'instructor' }, box, ' instructor (TRUTH)'));
+      }
       this.heatSelect = el('select', { title: 'heat layer' });
       this.heatSelect.onchange = () => this.draw();
       bar.append(this.heatSelect, this.sendBtn, this.cancelBtn, this.status);
@@ -293,6 +302,19 @@
       }
       if (this.layers.track) {
         line(this.state.track, '#3cf', 2);
+      }
+      const truth = this.state.instructor;
+      if (truth && this.layers.instructor !== false) {
+        // the oracle: drawn apart, magenta and labelled, never mistaken for telemetry
+        line(truth.track, '#ff2bd6', 1.5, [2, 3]);
+        if (truth.rover) {
+          const [px, py] = this.toPx(truth.rover[0], truth.rover[1]);
+          g.strokeStyle = '#ff2bd6';
+          g.lineWidth = 2;
+          g.strokeRect(px - 5, py - 5, 10, 10);
+        }
+        g.fillStyle = '#ff2bd6';
+        g.fillText('INSTRUCTOR OVERLAY: magenta = TRUE track (not known to the ground)', 6, 28);
       }
       if (this.preview) {
         line(this.preview.path, '#fff', 2, [3, 3]);
