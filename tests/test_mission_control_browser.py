@@ -3,6 +3,7 @@ live mission started with ``lunar-drake run --serve`` (skipped where no Chromium
 MCT is installed; ``./lunar.sh test`` installs both)."""
 
 import json
+import math
 import os
 import re
 import shutil
@@ -13,6 +14,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lunar_drake.mission_control.server import openmct_dir
@@ -38,17 +40,10 @@ def _post(url: str, body: dict):
         return json.loads(r.read())
 
 
-@pytest.fixture
-def live_mission(cache, tmp_path):
-    """A live goto mission without goals (the page gives them), paced to 2x real time."""
-    out = tmp_path / "run"
-    text = ("{simulation_duration: 400.0, ground: {goals: []}, "
-            "sensors: {camera: {enabled: true, width: 320, height: 240}, "
-            "nss: {enabled: true}}}")  # fmt: skip
-    cmd = [sys.executable, "-m", "lunar_drake.cli", "run", "--scenario", "goto",
-           "--scenario-text", text, "--serve", "--port", "0", "--foxglove-port", "0",
-           "--rate", "2", "--no-meshcat",
-           "--no-progress", "--out", str(out)]  # fmt: skip
+def _start_live(args: list[str], cache, out: Path):
+    """``lunar-drake run --serve ARGS`` on a free port; (url, process) once it runs."""
+    cmd = [sys.executable, "-m", "lunar_drake.cli", "run", *args, "--serve", "--port", "0",
+           "--no-meshcat", "--no-progress", "--out", str(out)]  # fmt: skip
     env = {**os.environ, "LUNAR_DRAKE_CACHE": str(cache)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env=env, start_new_session=True)  # fmt: skip
@@ -66,6 +61,18 @@ def live_mission(cache, tmp_path):
     while _get(url + "api/info")["state"] != "running":
         assert proc.poll() is None, "".join(lines) + proc.stdout.read()
         time.sleep(0.5)
+    return url, proc
+
+
+@pytest.fixture
+def live_mission(cache, tmp_path):
+    """A live goto mission without goals (the page gives them), paced to 2x real time."""
+    out = tmp_path / "run"
+    text = ("{simulation_duration: 400.0, ground: {goals: []}, "
+            "sensors: {camera: {enabled: true, width: 320, height: 240}, "
+            "nss: {enabled: true}}}")  # fmt: skip
+    url, proc = _start_live(["--scenario", "goto", "--scenario-text", text,
+                             "--foxglove-port", "0", "--rate", "2"], cache, out)  # fmt: skip
     yield url, proc, out
     if proc.poll() is None:
         os.killpg(proc.pid, signal.SIGKILL)
@@ -123,3 +130,67 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
     assert duration == pytest.approx(summary["simulated_s"]) and duration < 400.0
     events = (out / "ground_events.csv").read_text()
     assert re.search(r"goal,.*0: \(3\.\d\d, -?0\.\d\d\) m", events)
+
+
+def test_the_default_mission_is_driven_from_the_page(cache, tmp_path):
+    """``./lunar.sh run --serve``'s mission: the default scenario (orbital map, the mast's
+    stereo pair, VO), as fast as it runs, its goals left out so the page gives the only
+    one: a click on the map, 3 m from the rover where the ground's preview finds a path,
+    is driven to (the ground's judgement), and the true rover moved."""
+    from playwright.sync_api import sync_playwright
+
+    out = tmp_path / "run"
+    url, proc = _start_live(["--scenario-text", "{ground: {goals: []}}",
+                             "--foxglove-port", "-1", "--rate", "0"], cache, out)  # fmt: skip
+    try:
+        info = _get(url + "api/info")
+        assert info["map_source"] == "orbital"
+        sx, sy = info["spawn_xy"]
+        errors = []
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1700, "height": 860})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(url)
+            page.wait_for_function("() => window.lunarMap && window.lunarMap.view",
+                                   timeout=60_000)  # fmt: skip
+            page.wait_for_function(
+                "() => (window.lunarRealtime.delivered['rover.speed'] || 0) >= 2", timeout=300_000)
+            goal = None
+            for ang in range(0, 360, 45):  # a goal the ground can plan to
+                gx = sx + 3.0 * math.cos(math.radians(ang))
+                gy = sy + 3.0 * math.sin(math.radians(ang))
+                r = page.evaluate(
+                    "async ([x, y]) => { const r = await fetch('/api/preview', {method: 'POST',"
+                    " headers: {'Content-Type': 'application/json'}, body: JSON.stringify("
+                    "{x_m: x, y_m: y})}); return [r.status, await r.json()]; }", [gx, gy])
+                if r[0] == 200:
+                    goal = (gx, gy)
+                    break
+            assert goal is not None, "no plannable goal 3 m from the spawn"
+            px = page.evaluate(f"() => window.lunarMap.toPx({goal[0]}, {goal[1]})")
+            page.locator(".lunar-map canvas").click(position={"x": px[0], "y": px[1]})
+            page.wait_for_selector("text=Send goal", state="visible", timeout=60_000)
+            page.click("text=Send goal")
+            page.wait_for_function(
+                "() => window.lunarMap.root.dataset.ack === 'acknowledged'", timeout=300_000)
+            page.wait_for_function(
+                "() => (window.lunarMap.state.goals || []).some((g) => g[2] === 'reached')",
+                timeout=600_000)  # fmt: skip
+            page.wait_for_timeout(1500)
+            SCREENSHOTS.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(SCREENSHOTS / "default.png"))
+            browser.close()
+        assert not errors, errors
+        _post(url + "api/end", {})
+        assert proc.wait(300) == 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "ended from mission control"
+    assert summary["ground"]["map_source"] == "orbital"
+    truth = np.loadtxt(out / "truth.csv", delimiter=",", skiprows=1, usecols=(1, 2))
+    assert math.hypot(*(truth[-1] - goal)) < 1.5  # the true rover got there
