@@ -8,7 +8,9 @@ the solar array, loads and battery, with ``power.enabled``),
 link), ``modes.csv`` (every on-board mode change), ``ground_events.csv`` (what the
 ground did and saw: goals, plans, safings, resumes), ``images.csv`` (the stereo frames
 the ground received, compressed), ``keyframes.csv`` (the ground's stereo / VO /
-mapping keyframes; with ground perception), ``nss.csv`` and ``nss_map.png`` (the
+mapping keyframes; with ground perception), ``keyframe_points.npy`` (the points the
+ground mapped from each keyframe, in its own site frame: :data:`KEYFRAME_POINTS_DTYPE`;
+with ground perception and ``cloud_voxel_m`` > 0), ``nss.csv`` and ``nss_map.png`` (the
 neutron spectrometer's records as the ground received them and its hydrogen map; with
 ``sensors.nss``), ``nirvss.csv`` and ``lcs.csv`` (NIRVSS band depths and the LCS
 temperature as received; with ``sensors.nirvss``), ``drill.csv`` (drill samples read
@@ -27,6 +29,8 @@ import dataclasses as dc
 import json
 import math
 from pathlib import Path
+
+import numpy as np
 
 from lunar_drake.comms.link import LINK_RECORD_FIELDS
 from lunar_drake.files import atomic_path, atomic_write_text
@@ -74,6 +78,7 @@ RUN_DIR_NAMES = frozenset(
         "ground_events.csv",
         "images.csv",
         "keyframes.csv",
+        "keyframe_points.npy",
         *SCIENCE_FILES,
         "ground_map.png",
         "calibration.yaml",
@@ -82,6 +87,31 @@ RUN_DIR_NAMES = frozenset(
         "meshcat.html",
     ]
 )
+
+
+#: ``keyframe_points.npy`` (a NumPy ``.npy`` file of one structured array, keyframe after
+#: keyframe): the keyframe's ``frame_index`` and one point the ground mapped from it
+#: (``x``, ``y``, ``z``; m, float32, the site frame placed with the ground's estimate
+#: ``X_WC_ground``, never truth; one per ``ground.perception.cloud_voxel_m`` voxel).
+KEYFRAME_POINTS_DTYPE = np.dtype([("frame_index", "<i4"), ("x", "<f4"), ("y", "<f4"),
+                                  ("z", "<f4")])  # fmt: skip
+
+
+def write_keyframe_points(path: str | Path, *, clouds) -> Path:
+    """Writes ``clouds`` (:class:`~lunar_drake.perception.ground_pipeline.KeyframeCloud`
+    each) to ``path`` atomically as :data:`KEYFRAME_POINTS_DTYPE` rows (``.npy``: no
+    timestamps, the same clouds give the same bytes); returns ``path``."""
+    rows = np.empty(sum(len(c.points_W) for c in clouds), KEYFRAME_POINTS_DTYPE)
+    i = 0
+    for c in clouds:
+        p = np.asarray(c.points_W, np.float32).reshape(-1, 3)
+        rows["frame_index"][i : i + len(p)] = int(c.frame_index)
+        for k, name in enumerate("xyz"):
+            rows[name][i : i + len(p)] = p[:, k]
+        i += len(p)
+    with atomic_path(path, what="keyframe points") as tmp, open(tmp, "wb") as f:
+        np.save(f, rows, allow_pickle=False)
+    return Path(path)
 
 
 def _fmt(v) -> str:
@@ -284,6 +314,9 @@ def write_run(
         )
         write_csv(out / "keyframes.csv", names, rows)
         paths.append(out / "keyframes.csv")
+    if getattr(logs, "keyframe_clouds", None):
+        paths.append(write_keyframe_points(out / "keyframe_points.npy",
+                                           clouds=logs.keyframe_clouds))  # fmt: skip
     if getattr(logs, "ground_costmap", None) is not None:
         from lunar_drake.ground_map import write_ground_map
 

@@ -113,6 +113,9 @@ class SimulationLogs:
             :class:`~lunar_drake.comms.science.ScienceRecord`) each, in sample order.
         keyframes: the ground perception's processed keyframes
             (:class:`~lunar_drake.perception.ground_pipeline.KeyframeRecord`).
+        keyframe_clouds: the points the ground mapped from each keyframe, in its own
+            site frame (:class:`~lunar_drake.perception.ground_pipeline.KeyframeCloud`;
+            none with ``ground.perception.cloud_voxel_m`` 0).
         ground_costmap: the ground's final costmap (a-priori + stereo hazards; the
             a-priori one without ground perception), or None when it had no map.
         ground_prior_costmap: the ground's a-priori costmap on the grid of
@@ -140,6 +143,7 @@ class SimulationLogs:
     images_received: list = dc.field(default_factory=list)
     science_received: list = dc.field(default_factory=list)
     keyframes: list = dc.field(default_factory=list)
+    keyframe_clouds: list = dc.field(default_factory=list)
     ground_costmap: object = None
     ground_prior_costmap: object = None
     ground_first_lethal_s: object = None
@@ -457,10 +461,12 @@ def collect_logs(run: MissionRun, *, stop_reason: str) -> SimulationLogs:
         science = [(d.t_received_s, d.message.payload)
                    for d in rx.received(rx.GetMyContextFromRoot(root))]  # fmt: skip
     keyframes, costmap, prior = [], operator.prior_costmap, operator.prior_costmap
+    clouds = []
     first_lethal = None
     if (gp := run.ground_system("ground.perception")) is not None:
         pst = gp.perception_state(root)
         keyframes, costmap = pst.records.items(), pst.costmap
+        clouds = pst.clouds.items()
         first_lethal = pst.first_lethal_s
         prior = gp.costmap_output.Allocate().get_value()[1]  # the prior, refined
     return SimulationLogs(
@@ -477,6 +483,7 @@ def collect_logs(run: MissionRun, *, stop_reason: str) -> SimulationLogs:
         images_received=images,
         science_received=science,
         keyframes=keyframes,
+        keyframe_clouds=clouds,
         ground_costmap=costmap,
         ground_prior_costmap=prior,
         ground_first_lethal_s=first_lethal,

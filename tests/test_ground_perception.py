@@ -29,6 +29,7 @@ from lunar_drake.perception.ground_pipeline import (
     perception_step,
     planar_correction,
     pose_matrix,
+    voxel_downsample,
 )
 from lunar_drake.render.camera import CameraConfig
 
@@ -184,6 +185,56 @@ def test_recentring_keeps_the_cells_of_the_overlap_in_place():
     assert moved.count[moved.cell_of(6.05, 4.05)] == 7 and moved.count.sum() == 7
 
 
+def test_voxel_downsample_keeps_one_centroid_per_voxel_in_voxel_order():
+    pts = np.array([[0.01, 0.02, 0.03], [0.25, 0.05, 0.05], [0.09, 0.08, 0.07],
+                    [0.15, 0.0, 0.0], [math.nan, 0.0, 0.0], [-0.05, 0.0, 0.0]])  # fmt: skip
+    out = voxel_downsample(pts, voxel_m=0.1)
+    expected = np.array([[-0.05, 0.0, 0.0], [0.05, 0.05, 0.05], [0.15, 0.0, 0.0],
+                         [0.25, 0.05, 0.05]], np.float32)  # fmt: skip
+    assert out.dtype == np.float32 and out.shape == (4, 3)
+    np.testing.assert_allclose(out, expected, atol=1e-7)
+    # the same bytes again, and from the points in another order (sorted by voxel)
+    assert voxel_downsample(pts, voxel_m=0.1).tobytes() == out.tobytes()
+    assert voxel_downsample(pts[::-1], voxel_m=0.1).tobytes() == out.tobytes()
+    assert voxel_downsample(pts, voxel_m=0.0).shape == (0, 3)
+    assert voxel_downsample(np.empty((0, 3)), voxel_m=0.1).shape == (0, 3)
+    # many points: as many as the occupied voxels, each one inside its voxel's cube
+    g = np.random.default_rng(3).uniform(-1.0, 1.0, (5000, 3))
+    keys = np.unique(np.floor(g / 0.25), axis=0)
+    out = voxel_downsample(g, voxel_m=0.25)
+    assert len(out) == len(keys)
+    np.testing.assert_array_equal(np.floor(out / 0.25), keys)
+
+
+def test_the_ground_keeps_the_points_it_mapped_per_keyframe_and_decides_the_same(scene):
+    """Each keyframe's mapped points, one per ``cloud_voxel_m`` voxel, lie on the scene
+    (the plane z = 0, the boulder) within the map's range of the camera; with
+    ``cloud_voxel_m`` 0 none are kept and the ground's records and costmap are the same."""
+    p0 = _pose6(0.0, 0.0, 0.0)
+    f0 = scene["frame"](0, pose_matrix(p0), p0)
+    runs = {}
+    for voxel in (0.1, 0.0):
+        cfg = PerceptionConfig(cloud_voxel_m=voxel)
+        runs[voxel] = perception_step(PerceptionState(costmap=scene["prior"]), [(0, f0)],
+                                      prior=scene["dem"], config=cfg, **scene["kw"])  # fmt: skip
+    st = runs[0.1]
+    (cloud,) = st.clouds.items()
+    assert cloud.frame_index == 0 and cloud.t_capture_s == f0.t_capture_s
+    p = cloud.points_W
+    assert p.dtype == np.float32 and 500 < len(p) < st.records.items()[0].points
+    assert not p.flags.writeable and np.isfinite(p).all()
+    # one per voxel, on the ground or the boulder (0.35 m), ahead of the camera
+    assert len(np.unique(np.floor(p / 0.1), axis=0)) == len(p)
+    assert np.abs(p[:, 2]).min() < 0.02 and -0.1 < np.median(p[:, 2]) < 0.1
+    assert (p[:, 2] < BOULDER[2] + 0.1).all()
+    r = np.linalg.norm(p - (_X_BC()[:3, 3] + (0.0, 0.0, 0.3)), axis=1)
+    cfg = PerceptionConfig().map
+    assert r.min() >= cfg.min_range_m - 0.1 and r.max() <= cfg.max_range_m + 0.1
+    assert not runs[0.0].clouds.items()
+    assert [repr(r) for r in runs[0.0].records.items()] == [repr(r) for r in st.records.items()]
+    assert np.array_equal(runs[0.0].costmap.lethal_raw, st.costmap.lethal_raw)
+
+
 def test_a_boulder_seen_in_stereo_becomes_lethal_and_blocks_the_path(scene):
     st = PerceptionState(costmap=scene["prior"])
     path = [(0.0, 0.0), (12.0, 0.0)]
@@ -304,7 +355,8 @@ def test_frames_between_keyframes_are_skipped(scene):
 
 @pytest.mark.parametrize(
     "field, value",
-    [("keyframe_m", -1.0), ("window_m", 5.0), ("vo_sigma_m", 0.0), ("gimbal_settle_s", -1.0)],
+    [("keyframe_m", -1.0), ("window_m", 5.0), ("vo_sigma_m", 0.0), ("gimbal_settle_s", -1.0),
+     ("cloud_voxel_m", -0.1)],
 )
 def test_perception_config_errors_name_the_field(field, value):
     with pytest.raises(OutOfRangeError, match=field):
@@ -343,5 +395,10 @@ def test_a_mission_with_ground_perception_writes_its_keyframes_and_map(cache, tm
     sig = [float(r["sigma_m"]) for r in rows]
     assert sig[0] == 0.0 and all(b >= a for a, b in itertools.pairwise(sig)) and sig[-1] > 0
     assert gp["final_sigma_m"] == pytest.approx(sig[-1], rel=1e-5)
+    # the points it mapped: keyframe after keyframe, as many as it kept
+    pts = np.load(tmp_path / "keyframe_points.npy", allow_pickle=False)
+    order = list(dict.fromkeys(pts["frame_index"].tolist()))
+    assert order == [int(r["frame_index"]) for r in rows if int(float(r["points"])) > 0]
+    assert len(pts) == sum(len(c.points_W) for c in logs.keyframe_clouds) > 100 * len(order)
     png = (tmp_path / "ground_map.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000

@@ -494,6 +494,8 @@ def test_run_mcap_holds_the_expected_channels_and_counts(cache, tmp_path):
         schemas = {topics[c.id]: summary.schemas[c.schema_id].name if c.schema_id else ""
                    for c in summary.channels.values()}  # fmt: skip
         times = [m.log_time for _, _, m in reader.iter_messages()]
+        clouds = [(m.log_time, m.data)
+                  for _, _, m in reader.iter_messages(topics=["/ground/points"])]
     tel = rows("telemetry.csv")
     assert counts["/rover/pose_estimate"] == counts["/telemetry"] == len(tel) > 5
     assert counts["/ground/events"] == len(rows("ground_events.csv")) > 0
@@ -504,6 +506,7 @@ def test_run_mcap_holds_the_expected_channels_and_counts(cache, tmp_path):
     assert schemas["/camera/left/compressed"] == "foxglove.CompressedImage"
     assert schemas["/ground/costmap"] == "foxglove.Grid"
     assert times == sorted(times)
+    _check_ground_points(out, clouds, schemas, rows)
     # stamped with reception time: the first packet's, from the epoch of the scenario
     from lunar_drake.mission_control.server import epoch_ms
 
@@ -524,6 +527,74 @@ def test_run_mcap_holds_the_expected_channels_and_counts(cache, tmp_path):
     assert again.stat().st_size > 0
     third = write_run_mcap(out, out=tmp_path / "third.mcap", costmap=None)
     assert again.read_bytes() == third.read_bytes()
+
+
+def _protobuf_fields(buf: bytes) -> dict:
+    """A protobuf message's top-level fields: number -> values (varints as int, the
+    others as bytes); foxglove-sdk encodes but does not decode."""
+    out, i = {}, 0
+
+    def varint():
+        nonlocal i
+        v = shift = 0
+        while True:
+            b = buf[i]
+            i += 1
+            v |= (b & 0x7F) << shift
+            shift += 7
+            if b < 0x80:
+                return v
+
+    while i < len(buf):
+        key = varint()
+        if key & 7 == 0:
+            val = varint()
+        else:
+            n = {1: 8, 5: 4}.get(key & 7) or varint()
+            val, i = buf[i : i + n], i + n
+        out.setdefault(key >> 3, []).append(val)
+    return out
+
+
+def _check_ground_points(out, clouds, schemas, rows):
+    """``/ground/points``: one cloud per keyframe, stamped when the ground received its
+    frame, its points (``keyframe_points.npy``) finite and round the keyframe's ground
+    pose (within the map's range of the camera), one per ``cloud_voxel_m`` voxel."""
+    from lunar_drake.mission_control.recording import ns_since_epoch
+    from lunar_drake.outputs import write_keyframe_points
+    from lunar_drake.perception.ground_pipeline import KeyframeCloud
+    from lunar_drake.scenario_files import load_scenario
+
+    per = load_scenario(filename=out / "scenario.yaml").ground.perception
+    kf = rows("keyframes.csv")
+    received = {}
+    for r in rows("images.csv"):
+        received.setdefault(int(r["frame_index"]), float(r["t_received_s"]))
+    assert schemas["/ground/points"] == "foxglove.PointCloud"
+    assert len(clouds) == len(kf) > 0
+    file = np.load(out / "keyframe_points.npy", allow_pickle=False)
+    assert file.dtype.names == ("frame_index", "x", "y", "z")
+    assert sorted(set(file["frame_index"].tolist())) == sorted(int(r["frame_index"]) for r in kf)
+    by_time = sorted(kf, key=lambda r: received[int(r["frame_index"])])
+    again = []
+    for (t, data), r in zip(clouds, by_time, strict=True):
+        assert t == ns_since_epoch("2027-11-15T00:00:00", received[int(r["frame_index"])])
+        msg = _protobuf_fields(data)  # foxglove.PointCloud: 2 frame_id, 4 stride, 6 data
+        assert msg[2] == [b"site"] and msg[4] == [(12).to_bytes(4, "little")]
+        pts = np.frombuffer(msg[6][0], np.float32).reshape(-1, 3)
+        mine = file[file["frame_index"] == int(r["frame_index"])]
+        np.testing.assert_array_equal(pts, np.stack([mine["x"], mine["y"], mine["z"]], 1))
+        assert len(pts) > 100 and np.isfinite(pts).all()
+        # around the ground's pose of the chassis (the camera is on its mast, < 1 m off)
+        d = np.hypot(pts[:, 0] - float(r["x_m"]), pts[:, 1] - float(r["y_m"]))
+        assert d.max() <= per.map.max_range_m + 1.0
+        assert len(np.unique(np.floor(pts / per.cloud_voxel_m), axis=0)) >= 0.99 * len(pts)
+        again.append(KeyframeCloud(t_capture_s=float(r["t_capture_s"]),
+                                   frame_index=int(r["frame_index"]), points_W=pts))  # fmt: skip
+    # written again from the same clouds: the same bytes (no timestamps inside)
+    again.sort(key=lambda c: [int(r["frame_index"]) for r in kf].index(c.frame_index))
+    copy = write_keyframe_points(out.parent / "again.npy", clouds=again)
+    assert copy.read_bytes() == (out / "keyframe_points.npy").read_bytes()
 
 
 def test_the_foxglove_live_server_advertises_the_live_topics():

@@ -440,6 +440,8 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
             files.append(name)
     if per.get("keyframes"):
         files.append("keyframes.csv")
+    if (out / "keyframe_points.npy").exists():
+        files.append("keyframe_points.npy")
     if (out / "ground_map.png").exists():
         files.append("ground_map.png")
     if scenario.sensors.camera.enabled:

@@ -15,6 +15,8 @@ topic                       schema             from
 ``/ground/events``          Log                the ground's events (safings as warnings)
 ``/camera/left/compressed`` CompressedImage    stereo frames the ground received (JPEG)
 ``/ground/keyframes``       PointCloud         where the ground's VO placed each keyframe
+``/ground/points``          PointCloud         each keyframe's stereo points, as the ground
+                                               mapped them (``keyframe_points.npy``)
 ``/ground/costmap``         Grid               the ground's final costmap (uint8 classes)
 ``/science/nss``            JSON               NSS records as received, with the WEH estimate
 ==========================  =================  =============================================
@@ -34,7 +36,7 @@ from lunar_drake.errors import ConfigError
 
 #: The channels' topics, for tests and the README.
 TOPICS = ("/rover/pose_estimate", "/ground/pose", "/tf", "/telemetry", "/ground/events",
-          "/camera/left/compressed", "/ground/keyframes", "/ground/costmap",
+          "/camera/left/compressed", "/ground/keyframes", "/ground/points", "/ground/costmap",
           "/science/nss")  # fmt: skip
 
 def ns_since_epoch(epoch_utc: str, t_s: float) -> int:
@@ -111,6 +113,49 @@ def _quat(roll: float, pitch: float, yaw: float):
                       z=cr * cp * sy - sr * sp * cy, w=cr * cp * cy + sr * sp * sy)  # fmt: skip
 
 
+def _point_cloud(epoch_utc: str, t_s: float, points):
+    """A foxglove PointCloud in the ``site`` frame: ``points`` (N, 3; m) as x, y, z
+    float32."""
+    from foxglove.messages import (
+        PackedElementField,
+        PackedElementFieldNumericType,
+        PointCloud,
+        Pose,
+        Vector3,
+    )
+
+    f32 = PackedElementFieldNumericType.Float32
+    pts = np.ascontiguousarray(np.asarray(points, np.float32).reshape(-1, 3))
+    return PointCloud(timestamp=stamp(epoch_utc, t_s), frame_id="site",
+                      pose=Pose(position=Vector3(x=0, y=0, z=0), orientation=_quat(0, 0, 0)),
+                      point_stride=12,
+                      fields=[PackedElementField(name=n, offset=4 * k, type=f32)
+                              for k, n in enumerate("xyz")],
+                      data=pts.tobytes())  # fmt: skip
+
+
+def _keyframe_points(d: Path, kf: list[dict]) -> list[tuple[float, np.ndarray]]:
+    """Per row of ``keyframes.csv`` (``kf``), the time the ground received its frame
+    (``images.csv``; its capture time if not listed; s) and the points it mapped from it
+    (``keyframe_points.npy``: (N, 3) float32, m, site frame); none without that file."""
+    path = d / "keyframe_points.npy"
+    if not path.is_file():
+        return []
+    rows = np.load(path, allow_pickle=False)
+    if rows.dtype.names is None or not {"frame_index", "x", "y", "z"} <= set(rows.dtype.names):
+        raise ConfigError(f"{str(path)!r} holds no (frame_index, x, y, z) rows")
+    received = {}
+    for r in _rows(d / "images.csv"):
+        received.setdefault(int(r["frame_index"]), float(r["t_received_s"]))
+    out = []
+    for r in kf:
+        k = int(float(r["frame_index"]))
+        sel = rows[rows["frame_index"] == k]
+        pts = np.stack([sel["x"], sel["y"], sel["z"]], axis=1).astype(np.float32)
+        out.append((received.get(k, float(r["t_capture_s"])), pts))
+    return out
+
+
 def check_run_dir(run_dir: str | Path) -> Path:
     """``run_dir`` as a Path if it holds a run (``scenario.yaml`` and ``telemetry.csv``),
     else :class:`~lunar_drake.errors.ConfigError`."""
@@ -145,7 +190,6 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
         LogLevel,
         PackedElementField,
         PackedElementFieldNumericType,
-        PointCloud,
         Pose,
         Vector2,
         Vector3,
@@ -208,14 +252,12 @@ def write_run_mcap(run_dir: str | Path, *, out: str | Path | None = None,
             cloud = PointCloudChannel("/ground/keyframes", context=ctx)
             pts = np.array([[float(r["x_m"]), float(r["y_m"]), 0.0] for r in kf], np.float32)
             t = float(kf[-1]["t_capture_s"])
-            f32 = PackedElementFieldNumericType.Float32
-            add(t, cloud, PointCloud(
-                timestamp=stamp(e, t), frame_id="site", pose=Pose(position=Vector3(x=0, y=0, z=0),
-                                                               orientation=_quat(0, 0, 0)),
-                point_stride=12,
-                fields=[PackedElementField(name=n, offset=4 * k, type=f32)
-                        for k, n in enumerate("xyz")],
-                data=pts.tobytes()))  # fmt: skip
+            add(t, cloud, _point_cloud(e, t, pts))
+        mapped = _keyframe_points(d, kf)
+        if mapped:
+            points = PointCloudChannel("/ground/points", context=ctx)
+            for t, pts in mapped:
+                add(t, points, _point_cloud(e, t, pts))
         if costmap is not None:
             from lunar_drake.mission_control.live import costmap_classes
 

@@ -34,6 +34,11 @@ the on-board pose estimate and the gimbal angles at capture):
   elevation map (:mod:`~lunar_drake.perception.elevation_map`, a ``window_m`` square
   re-centred on the rover when it nears an edge; what leaves it stays in the costmap);
   its hazards merged into the ground's costmap (never clearing the a-priori hazards).
+* **record**: the mapped points (``p_W``: in the site frame through the ground's pose
+  ``X_WC_ground``, past the self-radius, prior-gate and the map's range limits), one per
+  ``cloud_voxel_m`` voxel (:func:`voxel_downsample`), kept as a :class:`KeyframeCloud`
+  in ``PerceptionState.clouds`` for the run's record; nothing the ground decides reads
+  them.
 
 Frames: ``X_WB`` chassis in the site frame, ``X_BC`` left camera in the chassis frame
 (``camera_in_chassis(pan, tilt)``), camera axes x right, y down, z forward.
@@ -73,6 +78,10 @@ class PerceptionConfig:
             (m; 0: half the wheelbase + wheel radius + the footprint radius, the rover's
             own wheels and body) are left out of the map.
         window_m: side of the local elevation map (m).
+        cloud_voxel_m: each keyframe's mapped points are kept for the run's record
+            (``keyframe_points.npy``, ``/ground/points`` in ``run.mcap``), one per cube
+            of this side (their centroid; m); 0: none kept. Recording only: nothing the
+            ground decides reads them.
         use_vo: fuse VO into the ground's pose (else the on-board estimate alone).
         odom_sigma_fraction, odom_sigma_min_m: on-board translation sigma between
             keyframes: fraction of the distance, plus a floor (m). 5 %: on the
@@ -108,6 +117,7 @@ class PerceptionConfig:
     self_radius_m: float = 0.0
     prior_gate_m: float = 1.0
     window_m: float = 30.0
+    cloud_voxel_m: float = 0.1
     use_vo: bool = True
     odom_sigma_fraction: float = 0.05
     odom_sigma_min_m: float = 0.005
@@ -128,6 +138,7 @@ class PerceptionConfig:
         check_range("prior_gate_m", self.prior_gate_m, 0.01, 100.0, unit=" m")
         check_range("self_radius_m", self.self_radius_m, 0.0, 20.0, unit=" m")
         check_range("window_m", self.window_m, 2.0 * self.max_range_m, 1000.0, unit=" m")
+        check_range("cloud_voxel_m", self.cloud_voxel_m, 0.0, 10.0, unit=" m")
         check_range("odom_sigma_fraction", self.odom_sigma_fraction, 0.0, 1.0)
         check_range("odom_sigma_min_m", self.odom_sigma_min_m, 1e-6, 10.0, unit=" m")
         check_range("odom_sigma_per_rad_m", self.odom_sigma_per_rad_m, 0.0, 100.0, unit=" m/rad")
@@ -182,6 +193,18 @@ class KeyframeRecord:
     tilt_rad: float = math.nan
 
 
+@dc.dataclass(frozen=True, eq=False)
+class KeyframeCloud:
+    """The stereo points the ground mapped from one keyframe (capture time
+    ``t_capture_s``, ``frame_index``): ``points_W`` (N, 3) float32, m, in the site frame
+    placed with the ground's camera pose ``X_WC_ground`` (never truth), one per
+    ``cloud_voxel_m`` voxel (:func:`voxel_downsample`). Read-only (shared by state copies)."""
+
+    t_capture_s: float
+    frame_index: int
+    points_W: np.ndarray
+
+
 @dc.dataclass(frozen=True)
 class PerceptionState:
     """What the ground's perception holds between frames (immutable; shared, not
@@ -199,6 +222,9 @@ class PerceptionState:
     costmap: object = None
     version: int = 0
     records: Ledger = dc.field(default_factory=Ledger)
+    #: The keyframes' mapped points (:class:`KeyframeCloud`; none with ``cloud_voxel_m``
+    #: 0), for the run's record.
+    clouds: Ledger = dc.field(default_factory=Ledger)
     #: Per costmap cell, the capture time (s) of the keyframe whose stereo first made it
     #: lethal (NaN: never); for scoring the hazard detection range.
     first_lethal_s: np.ndarray | None = None
@@ -263,6 +289,27 @@ def fuse_translation(t_odom, t_vo, *, sigma_odom_m: float, sigma_vo_m: float) ->
     """Inverse-variance mean of two translation estimates (isotropic sigmas, m)."""
     wo, wv = 1.0 / sigma_odom_m**2, 1.0 / sigma_vo_m**2
     return (wo * np.asarray(t_odom, np.float64) + wv * np.asarray(t_vo, np.float64)) / (wo + wv)
+
+
+def voxel_downsample(points, *, voxel_m: float) -> np.ndarray:
+    """One point per occupied ``voxel_m`` cube (m; a grid aligned with the points'
+    frame origin): the centroid of its points. ``points`` (N, 3; m), non-finite rows
+    dropped; returns (M, 3) float32 sorted by voxel index (x, then y, then z), empty
+    when ``voxel_m`` <= 0. Deterministic: the same points in the same order give the same
+    bytes."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if not voxel_m > 0.0 or not len(p):
+        return np.empty((0, 3), np.float32)
+    k = np.floor(p / voxel_m).astype(np.int64)
+    order = np.lexsort((k[:, 2], k[:, 1], k[:, 0]))  # stable: sums in the input's order
+    k, p = k[order], p[order]
+    new = np.ones(len(k), bool)
+    new[1:] = (k[1:] != k[:-1]).any(axis=1)
+    group = np.cumsum(new) - 1
+    n = np.bincount(group)
+    sums = np.stack([np.bincount(group, p[:, i], len(n)) for i in range(3)], axis=1)
+    return (sums / n[:, None]).astype(np.float32)
 
 
 def _moved(X0, X1) -> tuple[float, float]:
@@ -405,6 +452,15 @@ def perception_step(
         if prior is not None and len(p_W):
             dev = p_W[:, 2] - prior.sample(p_W[:, 0], p_W[:, 1])
             p_W = p_W[np.abs(dev - np.median(dev)) <= config.prior_gate_m]
+        clouds = s.clouds
+        if config.cloud_voxel_m > 0.0:  # the record: what fuse() takes (its range limits)
+            r = np.linalg.norm(p_W - X_WC_ground[:3, 3], axis=1)
+            pts = voxel_downsample(p_W[(r >= map_cfg.min_range_m) & (r <= map_cfg.max_range_m)],
+                                   voxel_m=config.cloud_voxel_m)  # fmt: skip
+            pts.flags.writeable = False  # shared by the state's copies
+            clouds = clouds.append(KeyframeCloud(t_capture_s=float(frame.t_capture_s),
+                                                 frame_index=int(frame.frame_index),
+                                                 points_W=pts))  # fmt: skip
         emap = _recentred(s.emap, X_WC_ground[:2, 3], window_m=config.window_m,
                           cell_m=map_cfg.cell_m)  # fmt: skip
         emap = fuse(emap, points_W=p_W, sensor_origin_W=X_WC_ground[:3, 3], config=map_cfg,
@@ -441,12 +497,13 @@ def perception_step(
             emap=emap,
             costmap=costmap,
             version=s.version + (1 if new_lethal else 0), records=s.records.append(rec),
-            first_lethal_s=first_lethal,
+            clouds=clouds, first_lethal_s=first_lethal,
         )  # fmt: skip
     return s
 
 
 __all__ = [
+    "KeyframeCloud",
     "KeyframeRecord",
     "PerceptionConfig",
     "PerceptionState",
@@ -455,4 +512,5 @@ __all__ = [
     "perception_step",
     "planar_correction",
     "pose_matrix",
+    "voxel_downsample",
 ]
