@@ -40,10 +40,10 @@ def _post(url: str, body: dict):
         return json.loads(r.read())
 
 
-def _start_live(args: list[str], cache, out: Path):
+def _start_live(args: list[str], cache, out: Path, *, meshcat: bool = False):
     """``lunar-drake run --serve ARGS`` on a free port; (url, process) once it runs."""
     cmd = [sys.executable, "-m", "lunar_drake.cli", "run", *args, "--serve", "--port", "0",
-           "--no-meshcat", "--no-progress", "--out", str(out)]  # fmt: skip
+           *([] if meshcat else ["--no-meshcat"]), "--no-progress", "--out", str(out)]  # fmt: skip
     env = {**os.environ, "LUNAR_DRAKE_CACHE": str(cache)}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env=env, start_new_session=True)  # fmt: skip
@@ -194,3 +194,49 @@ def test_the_default_mission_is_driven_from_the_page(cache, tmp_path):
     assert summary["ground"]["map_source"] == "orbital"
     truth = np.loadtxt(out / "truth.csv", delimiter=",", skiprows=1, usecols=(1, 2))
     assert math.hypot(*(truth[-1] - goal)) < 1.5  # the true rover got there
+
+
+def test_a_meshcat_button_clicked_in_the_browser_drives_the_rover(cache, tmp_path):
+    """Drake's Meshcat page in Chromium: *Drive arc (2 m)* (the arc sliders at their
+    defaults: 0.2 m/s, straight) goes through the operator API like the page's commands,
+    the rover drives, and the click is in the run's ``scenario.yaml``."""
+    from playwright.sync_api import sync_playwright
+
+    out = tmp_path / "run"
+    text = ("{simulation_duration: 300.0, ground: {goals: []}, "
+            "sensors: {camera: {enabled: false}}}")  # fmt: skip
+    url, proc = _start_live(["--scenario", "goto", "--scenario-text", text,
+                             "--foxglove-port", "-1", "--rate", "2"], cache, out,
+                            meshcat=True)  # fmt: skip
+    try:
+        meshcat_url, lines = None, []
+        while meshcat_url is None:
+            line = proc.stdout.readline()
+            assert line, "no Meshcat URL:\n" + "".join(lines)
+            lines.append(line)
+            m = re.search(r"^Meshcat: (http://\S+)", line)
+            meshcat_url = m.group(1) if m else None
+        x0 = _get(url + "api/history/rover.x?strategy=latest")
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(meshcat_url)
+            page.get_by_text("Open Controls").click(timeout=60_000)  # dat.GUI's panel
+            page.locator("li.cr.function", has_text="Drive arc (2 m)").click(timeout=60_000)
+            browser.close()
+        x_start = x0[-1]["value"] if x0 else 0.0
+        deadline = time.monotonic() + 240
+        moved = 0.0
+        while moved < 1.5 and time.monotonic() < deadline:
+            time.sleep(1.0)
+            got = _get(url + "api/history/rover.x?strategy=latest")
+            moved = abs(got[-1]["value"] - x_start) if got else 0.0
+        assert moved >= 1.5, f"the rover moved {moved:.2f} m after the click"
+        _post(url + "api/end", {})
+        assert proc.wait(300) == 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+    scenario = (out / "scenario.yaml").read_text()
+    assert "action: drive_arc" in scenario and "speed_mps: 0.2" in scenario
