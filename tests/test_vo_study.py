@@ -48,6 +48,12 @@ def test_rotation_study_writes_vo_csv_and_png(tmp_path, capsys):
         assert math.isfinite(float(r["vo_error_m"])) and r["rejected"] in ("0", "1")
     assert (out / "vo.png").stat().st_size > 10_000
     assert json.loads((out / "params.json").read_text())["config"]["angles_deg"] == [0.0, 15.0]
+    # on the trade-study engine (two dask workers, each loading the site itself): the
+    # same runs, the same bytes
+    again = tmp_path / "vo_on_dask"
+    assert main(["vo-study", "--angles", "0,15", "--workers", "2", "--out", str(again),
+                 *SMALL]) == 0  # fmt: skip
+    assert (again / "vo.csv").read_bytes() == (out / "vo.csv").read_bytes()
 
 
 def test_straight_study_writes_straight_json(tmp_path):

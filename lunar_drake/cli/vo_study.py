@@ -27,7 +27,8 @@ def command(args) -> int:
         calibrate_turns=not args.commanded_turns,
         images=args.images,
     )
-    out = run_vo_study(config=config, out_dir=args.out, progress=not args.no_progress)
+    out = run_vo_study(config=config, out_dir=args.out, progress=not args.no_progress,
+                       workers=args.workers, scheduler=args.scheduler)  # fmt: skip
     if args.straight is not None:
         print(f"{'distance m':>10} {'VO error m':>11} {'odom error m':>13} {'VO %':>6} "
               f"{'odom %':>7} {'rejected':>9}")  # fmt: skip
@@ -84,6 +85,10 @@ def add_parser(sub) -> None:
         action="store_true",
         help="turn by the commanded angle, not lengthened to the angle asked for",
     )
+    vs.add_argument("--workers", type=positive_int, default=1,
+                    help="parallel processes (dask.distributed, as lunar-drake trade)")
+    vs.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="an existing dask scheduler (tcp://HOST:PORT) for the runs")
     vs.add_argument("--out", required=True)
     vs.add_argument("--no-progress", action="store_true")
     vs.set_defaults(func=command)

@@ -528,34 +528,72 @@ def run_straight(*, config: VoStudyConfig, site, seed: int, progress=None) -> di
 # ----------------------------------------------------------------------------------------
 # the study
 # ----------------------------------------------------------------------------------------
-def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True) -> dict:
+_SITES: dict = {}
+
+
+def _site_of(config: VoStudyConfig):
+    """The study's site, loaded once per process (a worker loads its own from the
+    cache rather than receiving the whole raster)."""
+    from lunar_drake.site import load_site
+
+    base = _scenario_for(config, 0)
+    key = (config.scenario_name, config.lights)
+    if key not in _SITES:
+        _SITES[key] = load_site(base, progress=False)
+    return _SITES[key]
+
+
+def _efficiency_case(item) -> float:
+    config, seed = item
+    return turn_efficiency(config=config, site=_site_of(config), seed=seed)
+
+
+def _rotation_case(item) -> dict:
+    config, angle, seed, eff, images_dir = item
+    return run_rotation(config=config, site=_site_of(config), angle_deg=angle, seed=seed,
+                        turn_efficiency=eff, images_dir=images_dir)  # fmt: skip
+
+
+def _straight_case(item) -> dict:
+    config, seed = item
+    return run_straight(config=config, site=_site_of(config), seed=seed)
+
+
+def _map(fn, items: list, *, workers: int, scheduler, progress: bool, desc: str) -> list:
+    """``[fn(i) for i in items]`` here (one worker, no scheduler) or on the trade-study
+    engine (:func:`~lunar_drake.trade.engine.map_on_cluster`); the same results either
+    way, in the items' order."""
+    if workers > 1 or scheduler:
+        from lunar_drake.trade.engine import map_on_cluster
+
+        return map_on_cluster(fn, items, workers=workers, scheduler=scheduler,
+                              progress=progress, desc=desc)  # fmt: skip
+    from tqdm.auto import tqdm
+
+    return [fn(i) for i in tqdm(items, desc=desc, unit="run", disable=not progress)]
+
+
+def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True, workers: int = 1,
+                 scheduler: str | None = None) -> dict:  # fmt: skip
     """Runs the study and writes ``vo.csv`` + ``vo.png`` (rotation) or ``straight.json``
-    (straight) to ``out_dir``, with ``params.json``. Returns what was written."""
+    (straight) to ``out_dir``, with ``params.json``. Returns what was written.
+
+    Runs (the turn calibrations, then the rotations; or the straight drives) go to the
+    trade-study engine (dask.distributed) with ``workers > 1`` or a ``scheduler``
+    address, else run here; the files do not depend on the worker count.
+    """
     from lunar_drake.site import load_site
 
     config.validate()
+    if workers < 1:
+        raise ConfigError(f"workers = {workers!r}; must be >= 1")
     out_dir = ensure_output_dir(out_dir, what="--out directory")
-    base = _scenario_for(config, 0)
-    site = load_site(base, progress=progress)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    load_site(_scenario_for(config, 0), progress=progress)  # built (and cached) once, here
     params = {"config": dc.asdict(config), "method": __doc__.strip()}
+    run = {"workers": workers, "scheduler": scheduler, "progress": progress}
     if config.straight_m is not None:
-        runs = []
-        for seed in range(config.seeds):
-            if progress:
-                bar = tqdm(total=round(config.straight_m, 1), desc=f"straight seed {seed}",
-                           unit="m")  # fmt: skip
-
-                def tick(d, bar=bar):
-                    bar.n = round(min(d, config.straight_m), 1)
-                    bar.refresh()
-
-            runs.append(run_straight(config=config, site=site, seed=seed,
-                                     progress=tick if progress else None))  # fmt: skip
-            if bar is not None:
-                bar.close()
+        runs = _map(_straight_case, [(config, seed) for seed in range(config.seeds)],
+                    desc="straight drives", **run)  # fmt: skip
         doc = {
             "distance_m": float(np.mean([r["distance_m"] for r in runs])),
             "vo_error_m": float(np.mean([r["vo_error_m"] for r in runs])),
@@ -572,18 +610,17 @@ def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True) -> di
                           what="straight.json")  # fmt: skip
         atomic_write_text(out_dir / "params.json", json.dumps(params, indent=2) + "\n")
         return doc
-    seeds = range(config.seeds)
+    seeds = list(range(config.seeds))
     eff = {s: 1.0 for s in seeds}
     if config.calibrate_turns and any(a > 0 for a in config.angles_deg):
-        it = tqdm(seeds, desc="turn calibration", unit="seed") if progress else seeds
-        eff = {s: turn_efficiency(config=config, site=site, seed=s) for s in it}
-    cases = [(a, s) for a in config.angles_deg for s in seeds]
-    it = tqdm(cases, desc="vo study", unit="run") if progress else cases
+        got = _map(_efficiency_case, [(config, s) for s in seeds], desc="turn calibration",
+                   **run)  # fmt: skip
+        eff = dict(zip(seeds, got, strict=True))
     images_dir = None
     if config.images:
-        images_dir = ensure_output_dir(out_dir / "images", what="images directory")
-    rows = [run_rotation(config=config, site=site, angle_deg=a, seed=s, turn_efficiency=eff[s],
-                         images_dir=images_dir) for a, s in it]  # fmt: skip
+        images_dir = str(ensure_output_dir(out_dir / "images", what="images directory"))
+    cases = [(config, a, s, eff[s], images_dir) for a in config.angles_deg for s in seeds]
+    rows = _map(_rotation_case, cases, desc="vo study", **run)
     write_csv(out_dir / "vo.csv", rows)
     plot_vo(rows, path=out_dir / "vo.png", lights=config.lights)
     atomic_write_text(out_dir / "params.json", json.dumps(params, indent=2) + "\n")
