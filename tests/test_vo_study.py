@@ -24,6 +24,8 @@ def test_parse_angles_and_config_errors():
         VoStudyConfig(angles_deg=(200.0,)).validate()
     with pytest.raises(OutOfRangeError, match="turn_rate_dps"):
         VoStudyConfig(turn_rate_dps=0.0).validate()
+    with pytest.raises(OutOfRangeError, match="baseline_m"):
+        VoStudyConfig(baseline_m=0.0).validate()
 
 
 def test_rotation_study_writes_vo_csv_and_png(tmp_path, capsys):
@@ -48,6 +50,11 @@ def test_rotation_study_writes_vo_csv_and_png(tmp_path, capsys):
         assert math.isfinite(float(r["vo_error_m"])) and r["rejected"] in ("0", "1")
     assert (out / "vo.png").stat().st_size > 10_000
     assert json.loads((out / "params.json").read_text())["config"]["angles_deg"] == [0.0, 15.0]
+    from lunar_drake.scenario_files import load_scenario
+
+    d = load_scenario(scenario_name="small").rover.description
+    assert float(rows[0]["baseline_m"]) == d.camera_baseline_m
+    assert float(rows[0]["mast_height_m"]) == d.mast_height_m
     # on the trade-study engine (two dask workers, each loading the site itself): the
     # same runs, the same bytes
     again = tmp_path / "vo_on_dask"

@@ -23,6 +23,8 @@ def command(args) -> int:
         keyframe_m=args.keyframe,
         spawn_radius_m=args.spawn_radius,
         fov_y_deg=args.fov,
+        baseline_m=args.baseline,
+        mast_height_m=args.mast_height,
         max_range_m=args.max_range,
         calibrate_turns=not args.commanded_turns,
         images=args.images,
@@ -72,6 +74,11 @@ def add_parser(sub) -> None:
     vs.add_argument("--fov", type=positive_float, default=None, metavar="DEG",
                     help="the mast cameras' vertical field of view (deg; default: the "
                          "scenario's), for the lens trade")  # fmt: skip
+    vs.add_argument("--baseline", type=positive_float, default=None, metavar="M",
+                    help="the stereo baseline (m; default: the rover's), for the placement "
+                         "trade")  # fmt: skip
+    vs.add_argument("--mast-height", type=positive_float, default=None, metavar="M",
+                    help="the gimbal's height over the chassis (m; default: the rover's)")
     vs.add_argument("--max-range", type=positive_float, default=None, metavar="M",
                     help="stereo points aligned out to this depth (m; default: the "
                          "scenario's ground.perception.max_range_m)")  # fmt: skip

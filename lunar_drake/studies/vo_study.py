@@ -68,6 +68,8 @@ CSV_COLUMNS = (
     "lights",
     "turn_efficiency",
     "fov_y_deg",
+    "baseline_m",
+    "mast_height_m",
 )
 
 
@@ -90,6 +92,8 @@ class VoStudyConfig:
             scenario's ``ground.perception.max_range_m``).
         fov_y_deg: the mast cameras' vertical field of view (deg; None: the
             scenario's), for the lens trade.
+        baseline_m, mast_height_m: the stereo baseline and the gimbal's height over the
+            chassis (m; None: the rover's), for the placement trade.
         images: write each rotation run's two pairs (the left image beside its
             disparity) to ``images/`` in the output directory.
         calibrate_turns: command each turn so that the rover turns the angle asked
@@ -111,6 +115,8 @@ class VoStudyConfig:
     spawn_radius_m: float = 10.0
     max_range_m: float | None = None
     fov_y_deg: float | None = None
+    baseline_m: float | None = None
+    mast_height_m: float | None = None
     calibrate_turns: bool = True
     images: bool = False
 
@@ -132,6 +138,10 @@ class VoStudyConfig:
             check_range("max_range_m", self.max_range_m, 1.0, 100.0, unit=" m")
         if self.fov_y_deg is not None:
             check_range("fov_y_deg", self.fov_y_deg, 5.0, 120.0, unit=" deg")
+        if self.baseline_m is not None:
+            check_range("baseline_m", self.baseline_m, 0.01, 5.0, unit=" m")
+        if self.mast_height_m is not None:
+            check_range("mast_height_m", self.mast_height_m, 0.0, 20.0, unit=" m")
 
 
 def parse_angles(text: str) -> tuple:
@@ -232,6 +242,12 @@ def _scenario_for(config: VoStudyConfig, seed: int, site=None):
     if config.fov_y_deg is not None:
         cam.fov_y_deg = float(config.fov_y_deg)
     cam.validate()
+    d = s.rover.description
+    if config.baseline_m is not None:
+        d.camera_baseline_m = float(config.baseline_m)
+    if config.mast_height_m is not None:
+        d.mast_height_m = float(config.mast_height_m)
+    d.validate()
     s.flight.images.enabled = False
     s.ground.goals = []
     s.ground.actions = []
@@ -450,6 +466,8 @@ def run_rotation(*, config: VoStudyConfig, site, angle_deg: float, seed: int,
         "lights": bool(config.lights),
         "turn_efficiency": float(turn_efficiency),
         "fov_y_deg": float(s.sensors.camera.fov_y_deg),
+        "baseline_m": float(s.rover.description.camera_baseline_m),
+        "mast_height_m": float(s.rover.description.mast_height_m),
     }
 
 
