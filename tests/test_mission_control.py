@@ -268,6 +268,30 @@ def test_history_dictionary_and_json_errors():
     _with_client(mc, body)
 
 
+def test_a_drive_command_while_safed_is_sent_with_a_visible_warning():
+    """The rover ignores driving while safed: the reply to a goal or an arc says so (the
+    page shows it in red); a stop or a resume, and anything while nominal, carry none."""
+    import types
+
+    from lunar_drake.mission_control.live import LiveObserver
+
+    def run_with(packet):
+        ops = types.SimpleNamespace(packet=packet)
+        return types.SimpleNamespace(operator=types.SimpleNamespace(operator_state=lambda r: ops))
+
+    obs = LiveObserver(outbox=queue.Queue(), inbox=queue.Queue())
+    safed = run_with(_packet(mode=MODES.index("safed"),
+                             safe_reason=SAFE_REASONS.index("uplink_loss")))  # fmt: skip
+    goal = {"action": "goal", "x_m": 1.0, "y_m": 0.0}
+    w = obs._safed_warning(safed, None, goal)
+    assert "safed (uplink_loss)" in w and "resume" in w
+    assert "safed" in obs._safed_warning(safed, None, {"action": "drive_arc"})
+    assert obs._safed_warning(safed, None, {"action": "resume"}) == ""
+    nominal = run_with(_packet(mode=MODES.index("driving")))
+    assert obs._safed_warning(nominal, None, goal) == ""
+    assert obs._safed_warning(run_with(None), None, goal) == ""
+
+
 def test_the_instructor_overlay_is_off_unless_asked_and_never_telemetry():
     """Truth reaches the map only with ``instructor`` set (``run --serve --instructor``);
     without it a truth message is dropped, and truth is never a telemetry point."""
