@@ -262,6 +262,18 @@ def test_a_study_runs_on_a_real_scheduler_with_two_workers(tmp_path):
 
 
 @pytest.mark.slow
+def _square(x):
+    return x * x
+
+
+def test_map_cases_runs_here_with_one_worker_and_refuses_none():
+    from lunar_drake.trade.engine import map_cases
+
+    assert map_cases(_square, [3, 1, 2], workers=1, progress=False) == [9, 1, 4]
+    with pytest.raises(ConfigError, match="workers = 0"):
+        map_cases(_square, [1], workers=0, progress=False)
+
+
 def test_slip_study_runs_on_the_study_engine_with_the_same_rows(tmp_path):
     """slip-study keeps its command; with --workers > 1 its cases run on the trade
     engine (dask.distributed) and slip.csv is the same bytes as in one process."""

@@ -348,20 +348,10 @@ def run_slip_study(
         for k in range(seeds)
     ]
     out_dir = ensure_output_dir(out_dir, what="--out directory")
-    if workers > 1 or scheduler:
-        from lunar_drake.trade.engine import map_on_cluster
+    from lunar_drake.trade.engine import map_cases
 
-        results = map_on_cluster(run_slip_case, cases, workers=workers, scheduler=scheduler,
-                                 progress=progress, desc="slip study")  # fmt: skip
-    else:
-        results = []
-        it = cases
-        if progress:
-            from tqdm.auto import tqdm
-
-            it = tqdm(cases, desc="slip study", unit="run")
-        for c in it:
-            results.append(run_slip_case(c))
+    results = map_cases(run_slip_case, cases, workers=workers, scheduler=scheduler,
+                        progress=progress, desc="slip study")  # fmt: skip
     rows = [r["row"] for r in results]
     params = {}
     for r in results:

@@ -577,20 +577,6 @@ def _straight_case(item) -> dict:
     return run_straight(config=config, site=_site_of(config), seed=seed)
 
 
-def _map(fn, items: list, *, workers: int, scheduler, progress: bool, desc: str) -> list:
-    """``[fn(i) for i in items]`` here (one worker, no scheduler) or on the trade-study
-    engine (:func:`~lunar_drake.trade.engine.map_on_cluster`); the same results either
-    way, in the items' order."""
-    if workers > 1 or scheduler:
-        from lunar_drake.trade.engine import map_on_cluster
-
-        return map_on_cluster(fn, items, workers=workers, scheduler=scheduler,
-                              progress=progress, desc=desc)  # fmt: skip
-    from tqdm.auto import tqdm
-
-    return [fn(i) for i in tqdm(items, desc=desc, unit="run", disable=not progress)]
-
-
 def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True, workers: int = 1,
                  scheduler: str | None = None) -> dict:  # fmt: skip
     """Runs the study and writes ``vo.csv`` + ``vo.png`` (rotation) or ``straight.json``
@@ -603,14 +589,14 @@ def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True, worke
     from lunar_drake.site import load_site
 
     config.validate()
-    if workers < 1:
-        raise ConfigError(f"workers = {workers!r}; must be >= 1")
     out_dir = ensure_output_dir(out_dir, what="--out directory")
     load_site(_scenario_for(config, 0), progress=progress)  # built (and cached) once, here
+    from lunar_drake.trade.engine import map_cases
+
     params = {"config": dc.asdict(config), "method": __doc__.strip()}
     run = {"workers": workers, "scheduler": scheduler, "progress": progress}
     if config.straight_m is not None:
-        runs = _map(_straight_case, [(config, seed) for seed in range(config.seeds)],
+        runs = map_cases(_straight_case, [(config, seed) for seed in range(config.seeds)],
                     desc="straight drives", **run)  # fmt: skip
         doc = {
             "distance_m": float(np.mean([r["distance_m"] for r in runs])),
@@ -631,14 +617,14 @@ def run_vo_study(*, config: VoStudyConfig, out_dir, progress: bool = True, worke
     seeds = list(range(config.seeds))
     eff = {s: 1.0 for s in seeds}
     if config.calibrate_turns and any(a > 0 for a in config.angles_deg):
-        got = _map(_efficiency_case, [(config, s) for s in seeds], desc="turn calibration",
+        got = map_cases(_efficiency_case, [(config, s) for s in seeds], desc="turn calibration",
                    **run)  # fmt: skip
         eff = dict(zip(seeds, got, strict=True))
     images_dir = None
     if config.images:
         images_dir = str(ensure_output_dir(out_dir / "images", what="images directory"))
     cases = [(config, a, s, eff[s], images_dir) for a in config.angles_deg for s in seeds]
-    rows = _map(_rotation_case, cases, desc="vo study", **run)
+    rows = map_cases(_rotation_case, cases, desc="vo study", **run)
     write_csv(out_dir / "vo.csv", rows)
     plot_vo(rows, path=out_dir / "vo.png", lights=config.lights)
     atomic_write_text(out_dir / "params.json", json.dumps(params, indent=2) + "\n")

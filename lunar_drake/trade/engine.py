@@ -263,6 +263,25 @@ def map_on_cluster(fn, items: list, *, workers: int = 2, scheduler: str | None =
             disconnect(client, cluster)
 
 
+def map_cases(fn, items: list, *, workers: int = 1, scheduler: str | None = None,
+              progress: bool = True, desc: str = "runs") -> list:  # fmt: skip
+    """``[fn(item) for item in items]``: in this process with one worker and no
+    scheduler, else on the engine (:func:`map_on_cluster`); the same results either way,
+    in the items' order, with a progress bar.
+
+    Raises:
+        ConfigError: workers < 1, or (on the engine) a malformed or unreachable scheduler.
+    """
+    if workers < 1:
+        raise ConfigError(f"workers = {workers!r}; must be >= 1")
+    if workers > 1 or scheduler:
+        return map_on_cluster(fn, items, workers=workers, scheduler=scheduler,
+                              progress=progress, desc=desc)  # fmt: skip
+    from tqdm.auto import tqdm
+
+    return [fn(item) for item in tqdm(items, desc=desc, unit="run", disable=not progress)]
+
+
 def _run_jobs(client, study: Study, todo: list[Job], run: StudyRun, *, progress: bool) -> None:
     from distributed import as_completed
     from tqdm import tqdm
