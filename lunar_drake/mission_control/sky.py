@@ -16,7 +16,6 @@ import math
 import types
 
 import numpy as np
-from scipy import ndimage
 
 from lunar_drake.errors import LunarDrakeError
 
@@ -44,12 +43,12 @@ class MapHeights:
                                      bottom=self.y1_m - rows * self.resolution_m, top=self.y1_m)
 
     def heights_within(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        from lunar_drake.perception.elevation_map import PriorDem
+
         x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
         b = self.bounds
         ok = (x >= b.left) & (x <= b.right) & (y >= b.bottom) & (y <= b.top)
-        col = (x - self.x0_m) / self.resolution_m - 0.5
-        row = (self.y1_m - y) / self.resolution_m - 0.5
-        z = ndimage.map_coordinates(self.z, [row, col], order=1, mode="nearest")
+        z = PriorDem(self.z, self.resolution_m, self.x0_m, self.y1_m).sample(x, y)
         return np.where(ok, z, -np.inf), ok
 
 
