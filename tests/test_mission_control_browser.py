@@ -2,6 +2,7 @@
 live mission started with ``lunar-drake run --serve`` (skipped where no Chromium or Open
 MCT is installed; ``./lunar.sh test`` installs both)."""
 
+import contextlib
 import json
 import math
 import os
@@ -64,6 +65,30 @@ def _start_live(args: list[str], cache, out: Path, *, meshcat: bool = False):
     return url, proc
 
 
+@contextlib.contextmanager
+def _live(args: list[str], cache, out: Path, *, meshcat: bool = False):
+    """:func:`_start_live` as a context: (url, process), killed on the way out if it is
+    still running."""
+    url, proc = _start_live(args, cache, out, meshcat=meshcat)
+    try:
+        yield url, proc
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(30)
+
+
+def _page(pw, errors: list | None = None, *, width: int = 1700, height: int = 860):
+    """(browser, page) in Debian's Chromium; console errors and page errors go to
+    ``errors``."""
+    browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+    page = browser.new_page(viewport={"width": width, "height": height})
+    if errors is not None:
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+    return browser, page
+
+
 @pytest.fixture
 def live_mission(cache, tmp_path):
     """A live goto mission without goals (the page gives them), paced to 2x real time."""
@@ -71,12 +96,9 @@ def live_mission(cache, tmp_path):
     text = ("{simulation_duration: 400.0, ground: {goals: []}, "
             "sensors: {camera: {enabled: true, width: 320, height: 240}, "
             "nss: {enabled: true}}}")  # fmt: skip
-    url, proc = _start_live(["--scenario", "goto", "--scenario-text", text,
-                             "--foxglove-port", "0", "--rate", "2"], cache, out)  # fmt: skip
-    yield url, proc, out
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait(30)
+    with _live(["--scenario", "goto", "--scenario-text", text, "--foxglove-port", "0",
+                "--rate", "2"], cache, out) as (url, proc):  # fmt: skip
+        yield url, proc, out
 
 
 def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
@@ -86,10 +108,7 @@ def test_the_page_loads_plots_live_and_a_clicked_goal_is_driven(live_mission):
     assert _get(url + "api/info")["foxglove"].startswith("ws://127.0.0.1:")
     errors = []
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1700, "height": 860})
-        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-        page.on("pageerror", lambda e: errors.append(str(e)))
+        browser, page = _page(pw, errors)
         page.goto(url)
         page.wait_for_selector(".lunar-map canvas", timeout=60_000)
         # a plot receives live points (the plots subscribed to rover.speed)
@@ -140,18 +159,14 @@ def test_the_default_mission_is_driven_from_the_page(cache, tmp_path):
     from playwright.sync_api import sync_playwright
 
     out = tmp_path / "run"
-    url, proc = _start_live(["--scenario-text", "{ground: {goals: []}}",
-                             "--foxglove-port", "-1", "--rate", "0"], cache, out)  # fmt: skip
-    try:
+    with _live(["--scenario-text", "{ground: {goals: []}}", "--foxglove-port", "-1",
+                "--rate", "0"], cache, out) as (url, proc):  # fmt: skip
         info = _get(url + "api/info")
         assert info["map_source"] == "orbital"
         sx, sy = info["spawn_xy"]
         errors = []
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1700, "height": 860})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
+            browser, page = _page(pw, errors)
             page.goto(url)
             page.wait_for_function("() => window.lunarMap && window.lunarMap.view",
                                    timeout=60_000)  # fmt: skip
@@ -185,10 +200,6 @@ def test_the_default_mission_is_driven_from_the_page(cache, tmp_path):
         assert not errors, errors
         _post(url + "api/end", {})
         assert proc.wait(300) == 0
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(30)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["stop_reason"] == "ended from mission control"
     assert summary["ground"]["map_source"] == "orbital"
@@ -205,10 +216,8 @@ def test_a_meshcat_button_clicked_in_the_browser_drives_the_rover(cache, tmp_pat
     out = tmp_path / "run"
     text = ("{simulation_duration: 300.0, ground: {goals: []}, "
             "sensors: {camera: {enabled: false}}}")  # fmt: skip
-    url, proc = _start_live(["--scenario", "goto", "--scenario-text", text,
-                             "--foxglove-port", "-1", "--rate", "2"], cache, out,
-                            meshcat=True)  # fmt: skip
-    try:
+    with _live(["--scenario", "goto", "--scenario-text", text, "--foxglove-port", "-1",
+                "--rate", "2"], cache, out, meshcat=True) as (url, proc):  # fmt: skip
         meshcat_url, lines = None, []
         while meshcat_url is None:
             line = proc.stdout.readline()
@@ -218,8 +227,7 @@ def test_a_meshcat_button_clicked_in_the_browser_drives_the_rover(cache, tmp_pat
             meshcat_url = m.group(1) if m else None
         x0 = _get(url + "api/history/rover.x?strategy=latest")
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            browser, page = _page(pw, width=1280, height=800)
             page.goto(meshcat_url)
             page.get_by_text("Open Controls").click(timeout=60_000)  # dat.GUI's panel
             page.locator("li.cr.function", has_text="Drive arc (2 m)").click(timeout=60_000)
@@ -234,9 +242,5 @@ def test_a_meshcat_button_clicked_in_the_browser_drives_the_rover(cache, tmp_pat
         assert moved >= 1.5, f"the rover moved {moved:.2f} m after the click"
         _post(url + "api/end", {})
         assert proc.wait(300) == 0
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(30)
     scenario = (out / "scenario.yaml").read_text()
     assert "action: drive_arc" in scenario and "speed_mps: 0.2" in scenario
