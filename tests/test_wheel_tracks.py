@@ -429,3 +429,33 @@ def test_output_connects_to_a_camera_style_input():
     np.testing.assert_allclose(
         f(np.array([1.0, 1.0, 5.0]), np.array([1.0, 2.0, 5.0])), [0.01, 0.01, 0]
     )
+
+
+def test_tracked_window_samples_as_the_whole_window():
+    """The camera's cut-down window (tiles with tracks + 2 cells of zeros) has the whole
+    window's values and gradients everywhere in the rectangle, edges and off-tile
+    ground included, and far fewer cells."""
+    r = TrackRaster(cell_m=C, tile_cells=16)  # 0.32 m tiles
+    rng = np.random.default_rng(8)
+    for _ in range(12):
+        a = rng.uniform(0.3, 1.1, 2)
+        r.stamp_segment(a, a + rng.uniform(-0.3, 0.3, 2), width_m=0.1, depth_m=0.02)
+    r.stamp_segment((2.9, -0.5), (3.4, -0.4), width_m=0.1, depth_m=0.02)  # half outside
+    r.stamp_segment((0.05, 1.57), (0.25, 1.57), width_m=0.03, depth_m=0.02)  # a tile's top row
+    win = dict(left=-1.0, bottom=-1.0, right=3.0, top=3.0)
+    full = sh.RasterSampler(*r.window(**win)[:1], bounds=r.window(**win)[1], outside=0.0)
+    cut_values, cut_bounds = r.tracked_window(**win)
+    cut = sh.RasterSampler(cut_values, bounds=cut_bounds, outside=0.0)
+    assert cut_values.size < full.values.size / 2
+    assert cut_bounds[2] == pytest.approx(3.0) and cut_bounds[1] > -0.99  # clipped; cut
+    q = rng.uniform(-1.2, 3.2, (2, 20000))
+    edge = np.linspace(-1.2, 3.2, 2000)  # along the cut's edges and the stamped area's
+    q = np.concatenate([q, [edge, np.full_like(edge, cut_bounds[3])],
+                        [np.full_like(edge, cut_bounds[0]), edge]], axis=1)  # fmt: skip
+    np.testing.assert_allclose(cut(q[0], q[1]), full(q[0], q[1]), atol=1e-6)
+    for g_cut, g_full in zip(cut.gradient(q[0], q[1]), full.gradient(q[0], q[1]), strict=True):
+        np.testing.assert_allclose(g_cut, g_full, atol=2e-4)  # m/m; slopes reach ~1
+        assert np.abs(g_full).max() > 0.1
+    assert r.tracked_window(left=10, bottom=10, right=11, top=11) is None
+    with pytest.raises(OutOfRangeError):
+        r.tracked_window(left=1, bottom=0, right=0, top=1)

@@ -302,10 +302,14 @@ def voxel_downsample(points, *, voxel_m: float) -> np.ndarray:
     if not voxel_m > 0.0 or not len(p):
         return np.empty((0, 3), np.float32)
     k = np.floor(p / voxel_m).astype(np.int64)
-    order = np.lexsort((k[:, 2], k[:, 1], k[:, 0]))  # stable: sums in the input's order
-    k, p = k[order], p[order]
-    new = np.ones(len(k), bool)
-    new[1:] = (k[1:] != k[:-1]).any(axis=1)
+    k -= k.min(axis=0)
+    span = k.max(axis=0) + 1
+    # one key in (x, y, z) order; a stable sort keeps the input's order inside a voxel
+    key = (k[:, 0] * span[1] + k[:, 1]) * span[2] + k[:, 2]
+    order = np.argsort(key, kind="stable")
+    key, p = key[order], p[order]
+    new = np.ones(len(key), bool)
+    new[1:] = key[1:] != key[:-1]
     group = np.cumsum(new) - 1
     n = np.bincount(group)
     sums = np.stack([np.bincount(group, p[:, i], len(n)) for i in range(3)], axis=1)

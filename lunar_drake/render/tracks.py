@@ -441,9 +441,14 @@ class TrackRaster:
                 f"window ({left!r}, {bottom!r}, {right!r}, {top!r}) is invalid; need finite "
                 "values with right > left and top > bottom (m)"
             )
-        c, T = self._c, self._T
+        c = self._c
         ix_lo, ix_hi = math.floor(lo[0] / c), math.ceil(lo[2] / c) - 1
         iy_lo, iy_hi = math.floor(lo[1] / c), math.ceil(lo[3] / c) - 1
+        return self._cells(ix_lo, ix_hi, iy_lo, iy_hi)
+
+    def _cells(self, ix_lo: int, ix_hi: int, iy_lo: int, iy_hi: int):
+        """:meth:`window` of the global cells ``ix_lo..ix_hi`` x ``iy_lo..iy_hi``."""
+        c, T = self._c, self._T
         vals = np.zeros((iy_hi - iy_lo + 1, ix_hi - ix_lo + 1), dtype=np.float32)
         for (tr, tc), a in self._tiles.items():
             ay, by = max(iy_lo, tr * T), min(iy_hi, tr * T + T - 1)
@@ -455,6 +460,40 @@ class TrackRaster:
             ]
         bounds = (ix_lo * c, iy_lo * c, (ix_hi + 1) * c, (iy_hi + 1) * c)
         return vals[::-1].copy(), bounds
+
+    def tracked_window(
+        self, *, left: float, bottom: float, right: float, top: float, margin_cells: int = 2
+    ) -> tuple[np.ndarray, tuple[float, float, float, float]] | None:
+        """:meth:`window` cut down to the allocated tiles inside the rectangle, grown by
+        ``margin_cells`` cells of the rectangle (None when no tile meets it).
+
+        Every cell of the rectangle outside the result is 0, and with the default margin
+        (2) so are the result's two outermost rings wherever they are not the
+        rectangle's own edge: ``RasterSampler(values, bounds=bounds, outside=0.0)`` then
+        has the values and the central-difference gradients of the whole window
+        everywhere (both 0 off the tiles), at a fraction of its cells -- a camera's
+        50 m window holds 6.8 M cells at 2 cm, the rover's recent tracks a few tiles.
+        """
+        c, T = self._c, self._T
+        lo = (float(left), float(bottom), float(right), float(top))
+        if not all(math.isfinite(v) for v in lo) or not (lo[2] > lo[0] and lo[3] > lo[1]):
+            return self.window(left=left, bottom=bottom, right=right, top=top)  # its error
+        ix_lo, ix_hi = math.floor(lo[0] / c), math.ceil(lo[2] / c) - 1
+        iy_lo, iy_hi = math.floor(lo[1] / c), math.ceil(lo[3] / c) - 1
+        hit = [
+            (tr, tc)
+            for tr, tc in self._tiles
+            if tr * T <= iy_hi and tr * T + T - 1 >= iy_lo and tc * T <= ix_hi
+            and tc * T + T - 1 >= ix_lo
+        ]  # fmt: skip
+        if not hit:
+            return None
+        m = int(margin_cells)
+        rows = [tr for tr, _ in hit]
+        cols = [tc for _, tc in hit]
+        ax, bx = max(ix_lo, min(cols) * T - m), min(ix_hi, max(cols) * T + T - 1 + m)
+        ay, by = max(iy_lo, min(rows) * T - m), min(iy_hi, max(rows) * T + T - 1 + m)
+        return self._cells(ax, bx, ay, by)
 
     def __repr__(self) -> str:
         return (

@@ -319,10 +319,14 @@ class HapkeCamera(LeafSystem):
             return None
         from lunar_drake.render.shading import RasterSampler
 
-        values, bounds = tracks.window(
+        # only the tiles with tracks (and a margin of zeros): the same values and
+        # gradients as the whole window, a fraction of its cells
+        window = tracks.tracked_window(
             left=p[0] - half_m, bottom=p[1] - half_m, right=p[0] + half_m, top=p[1] + half_m
         )
-        return RasterSampler(values, bounds=bounds, outside=0.0)
+        if window is None:
+            return None
+        return RasterSampler(window[0], bounds=window[1], outside=0.0)
 
     def _check_above_terrain(self, name: str, p, t: float) -> None:
         hf = self._r.heightfield

@@ -119,7 +119,10 @@ class LightmapSource(LeafSystem):
         k = min(int(np.searchsorted(ts, t, side="right")) - 1, len(ts) - 2)
         f = (t - ts[k]) / (ts[k + 1] - ts[k])
         a, b = self._bake(k), self._bake(k + 1)
-        return (a + np.float32(f) * (b - a)).astype(np.float32)
+        out = np.subtract(b, a, dtype=np.float32)  # a + f (b - a), float32, in place
+        out *= np.float32(f)
+        out += a
+        return out
 
     def _calc(self, context, output):
         lm = self.lightmap_at(context.get_time())
