@@ -211,7 +211,8 @@ def point_to_plane_information(points, target_points, target_normals, max_dist_m
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, np.float64)
-    d, k = cKDTree(np.asarray(target_points, np.float64)).query(p, distance_upper_bound=max_dist_m)
+    tree = cKDTree(np.asarray(target_points, np.float64))
+    d, k = tree.query(p, distance_upper_bound=max_dist_m, workers=-1)  # same answer, 2 cores
     ok = np.isfinite(d)
     if not ok.any():
         return np.zeros((6, 6))
@@ -248,7 +249,7 @@ def translation_icp(src, tgt, tgt_normals, *, init_T, max_dist_m: float, huber_m
     t = T[:3, 3].copy()
     tree = cKDTree(tgt)
     for _ in range(iterations):
-        d, k = tree.query(p + t, distance_upper_bound=max_dist_m)
+        d, k = tree.query(p + t, distance_upper_bound=max_dist_m, workers=-1)
         ok = np.isfinite(d)
         if ok.sum() < 6:
             return None
