@@ -67,6 +67,31 @@ def test_footprint_geometry_flat_slope_and_rock():
     assert _geom(flat, (4.99, 0.0, R)).off_terrain[0]
 
 
+
+def test_compiled_geometry_matches_the_lookup_path(monkeypatch):
+    """The one-call geometry and belly lookups of in-memory rasters give the same bits as
+    the general path (``Heightfield.heights_within``), off the raster and on nodata too."""
+    from lunar_drake.dynamics.contact_geometry import belly_penetration
+
+    rng = np.random.default_rng(4)
+    z = rng.normal(0.0, 0.05, (120, 120)).astype(np.float32)
+    z[40:44, 60:70] = np.nan
+    hf = Heightfield.from_array(z, resolution_m=0.05)
+    p = np.c_[rng.uniform(-3.2, 3.2, (300, 2)), rng.uniform(-0.1, 0.3, 300)]
+    axle = rng.normal(size=(300, 3)) * [0.2, 1.0, 0.2]
+    axle /= np.linalg.norm(axle, axis=1)[:, None]
+    args = dict(heightfield=hf, p_WWo=p, axle_W=axle, radius_m=R, width_m=B,
+                sampling=FootprintSampling())  # fmt: skip
+    fast, fast_belly = wheel_contact_geometry(**args), belly_penetration(heightfield=hf, p_WP=p)
+    monkeypatch.setattr(Heightfield, "within_kernel_args", lambda self, **_: None)
+    slow, slow_belly = wheel_contact_geometry(**args), belly_penetration(heightfield=hf, p_WP=p)
+    for name in ("sinkage", "n_W", "forward_W", "lateral_W", "p_WC", "off_terrain"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name), err_msg=name)
+    for a, b in zip(fast_belly, slow_belly, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert 0 < fast.off_terrain.sum() < 300 and (fast_belly[0] > 0).any()
+
+
 def _contact_forces(hf, *, p, v, w_spin):
     """Evaluates WheelRegolithContact for one wheel (body 1)."""
     sys = WheelRegolithContact(wheel_bodies=[1], wheel=WHEEL, soil=SOIL)

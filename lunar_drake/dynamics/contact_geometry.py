@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from lunar_drake.errors import OutOfRangeError
+from lunar_drake.terrain.heightfield import heights_in_box
 
 
 @dc.dataclass(frozen=True)
@@ -110,11 +111,17 @@ def wheel_contact_geometry(
     p = np.ascontiguousarray(p_WWo, dtype=np.float64).reshape(-1, 3)
     a = np.ascontiguousarray(axle_W, dtype=np.float64).reshape(-1, 3)
     U, Wc, pinv = _pattern(sampling, radius_m, width_m)
-    f_h, s_h, xs, ys = _footprint_points(p, a, U, Wc)
-    zt, ok = _safe_heights(heightfield, xs, ys)
-    sinkage, n_W, forward, lateral, p_WC, off = _footprint_plane(
-        p, a, f_h, s_h, U, zt, ok, pinv, float(radius_m)
-    )
+    raster = heightfield.within_kernel_args(margin_m=heightfield.resolution_m)
+    if raster is not None:  # one compiled call: the same operations as below
+        sinkage, n_W, forward, lateral, p_WC, off = _geometry_in_memory(
+            *raster, p, a, U, Wc, pinv, float(radius_m)
+        )
+    else:
+        f_h, s_h, xs, ys = _footprint_points(p, a, U, Wc)
+        zt, ok = _safe_heights(heightfield, xs, ys)
+        sinkage, n_W, forward, lateral, p_WC, off = _footprint_plane(
+            p, a, f_h, s_h, U, zt, ok, pinv, float(radius_m)
+        )
     return WheelContactGeometry(
         sinkage=sinkage,
         n_W=n_W,
@@ -195,6 +202,18 @@ def _footprint_plane(p, a, f_h, s_h, U, zt, ok, pinv, radius):  # pragma: no cov
     return sinkage, n_W, forward, lateral, p_WC, off
 
 
+@numba.njit(cache=True)
+def _geometry_in_memory(z, res, left, right, bottom, top, p, a, U, Wc, pinv,
+                        radius):  # pragma: no cover - numba
+    """:func:`_footprint_points`, the heights of an in-memory raster
+    (:func:`~lunar_drake.terrain.heightfield.heights_in_box`, the box already shrunk by
+    the margin) and :func:`_footprint_plane` in one call."""
+    f_h, s_h, xs, ys = _footprint_points(p, a, U, Wc)
+    n, k = xs.shape
+    zt, ok = heights_in_box(z, xs.ravel(), ys.ravel(), res, left, right, bottom, top)
+    return _footprint_plane(p, a, f_h, s_h, U, zt.reshape(n, k), ok.reshape(n, k), pinv, radius)
+
+
 _PATTERNS: dict = {}
 
 
@@ -226,7 +245,12 @@ def belly_penetration(*, heightfield, p_WP: np.ndarray):
     """Penetration (m, > 0 when the point is below the terrain), terrain normals and an
     off-terrain flag for chassis belly points ``p_WP`` (k, 3)."""
     p = np.asarray(p_WP, dtype=float).reshape(-1, 3)
-    zt, ok = _safe_heights(heightfield, p[:, 0], p[:, 1])
+    raster = heightfield.within_kernel_args(margin_m=heightfield.resolution_m)
+    if raster is not None:  # compiled: the same lookups as _safe_heights
+        zt, ok = heights_in_box(raster[0], np.ascontiguousarray(p[:, 0]),
+                                 np.ascontiguousarray(p[:, 1]), *raster[1:])  # fmt: skip
+    else:
+        zt, ok = _safe_heights(heightfield, p[:, 0], p[:, 1])
     pen = np.where(ok, zt - p[:, 2], -np.inf)
     nt = np.zeros((len(p), 3))
     nt[:, 2] = 1.0

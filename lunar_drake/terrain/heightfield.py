@@ -167,7 +167,7 @@ class BlockCacheInfo:
 
 
 @numba.njit(cache=True)
-def _heights_within(z, xs, ys, res, left, right, bottom, top):  # pragma: no cover - numba
+def heights_in_box(z, xs, ys, res, left, right, bottom, top):  # pragma: no cover - numba
     """Bilinear heights (float64) at points inside ``[left, right] x [bottom, top]`` (m)
     of the in-memory raster ``z``; -inf and ok False outside it or on nodata. The same
     operations, in the same order, as :meth:`Heightfield.height` (same bits)."""
@@ -599,6 +599,16 @@ class Heightfield:
             raise self._nodata_error("height", xf, yf, z)
         return z.reshape(shape)[()]
 
+    def within_kernel_args(self, *, margin_m: float = 0.0):
+        """``(z, resolution_m, left, right, bottom, top)`` for compiled callers of
+        :func:`heights_in_box` (the box shrunk by ``margin_m``, m), or None for a
+        file-backed raster. The same lookups as :meth:`heights_within`."""
+        if not isinstance(self._src, _ArraySource):
+            return None
+        b = self.bounds
+        return (self._src.z, self.resolution_m, b.left + margin_m, b.right - margin_m,
+                b.bottom + margin_m, b.top - margin_m)  # fmt: skip
+
     def heights_within(self, x, y, *, margin_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Heights (m) and an ``ok`` mask at site points (m) for the contact's hot loop:
         like :meth:`height` (same values), but points off the raster by less than
@@ -613,7 +623,7 @@ class Heightfield:
             b.top - margin_m,
         )
         if isinstance(self._src, _ArraySource):
-            z, ok = _heights_within(
+            z, ok = heights_in_box(
                 self._src.z, xx.ravel(), yy.ravel(), self.resolution_m, lo_x, hi_x, lo_y, hi_y
             )
             return z.reshape(xx.shape), ok.reshape(xx.shape)
