@@ -257,3 +257,24 @@ def test_servo_gains_place_the_bandwidth():
     )
     with pytest.raises(OutOfRangeError, match="inertia"):
         wheel_servo_gains(inertia=-1.0, bandwidth_hz=1.0, damping_ratio=0.7)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.07])
+def test_one_twist_compiled_path_gives_the_batch_bits(offset):
+    """A single twist (the flight software's call) goes through one compiled call; it
+    gives the batch path's bits: angles, speeds, saturation and needed angles, sideways
+    and standing twists and clipped wheels included."""
+    g = _geom(offset, steering_limit=math.radians(70))
+    rng = np.random.default_rng(11)
+    special = [[0.0, 0.3, 0.0], [0.0, -0.3, 0.0], [0.0, 0.0, 0.0], [1e-12, 0.0, 0.0],
+               [0.2, 0.2, 0.0], [0.0, 0.0, 0.4]]  # fmt: skip
+    twists = np.r_[_twists(400, 5), special]
+    for k, t in enumerate(twists):
+        prev = rng.uniform(-1.2, 1.2, 4) if k % 3 else None
+        one = explicit_steer_commands(t, geometry=g, previous_delta=prev, clip=True)
+        batch = explicit_steer_commands(t[None], geometry=g, previous_delta=prev, clip=True)
+        for name in ("delta", "omega", "saturated", "needed_delta"):
+            np.testing.assert_array_equal(getattr(one, name), getattr(batch, name)[0], name)
+    assert explicit_steer_commands([0.05, 0.3, 0.0], geometry=g, clip=True).saturated.any()
+    with pytest.raises(SteeringLimitError):  # without clip the batch path's error
+        explicit_steer_commands([0.05, 0.3, 0.0], geometry=g)

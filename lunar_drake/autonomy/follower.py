@@ -39,6 +39,7 @@ computes it from the ephemeris); a goto without one is followed with ``path``.
 import dataclasses as dc
 import math
 
+import numba
 import numpy as np
 
 from lunar_drake.errors import ConfigError, check_range
@@ -220,16 +221,32 @@ def cross_track(xy, waypoints) -> tuple[float, float]:
     """(signed distance m, positive left of the path; heading rad) of the path segment
     nearest ``xy`` (clamped projection: near a corner, the leg the rover is on)."""
     p = np.asarray(xy, dtype=float)
-    wp = np.asarray(waypoints, dtype=float)
-    a, b = wp[:-1], wp[1:]
-    d = b - a
-    L2 = np.maximum(np.sum(d * d, axis=1), 1e-18)
-    t = np.clip(np.sum((p - a) * d, axis=1) / L2, 0.0, 1.0)
-    q = a + t[:, None] * d
-    k = int(np.argmin(np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])))
-    n = math.sqrt(float(L2[k]))
-    e = (d[k, 0] * (p[1] - a[k, 1]) - d[k, 1] * (p[0] - a[k, 0])) / n
-    return float(e), math.atan2(d[k, 1], d[k, 0])
+    wp = np.ascontiguousarray(waypoints, dtype=float)
+    if wp.ndim != 2 or wp.shape[0] < 2 or wp.shape[1] != 2:
+        raise ValueError(f"waypoints have shape {wp.shape}; a path of (n >= 2, 2) is required")
+    e, heading = _cross_track(float(p[0]), float(p[1]), wp)
+    return float(e), float(heading)
+
+
+@numba.njit(cache=True)
+def _cross_track(px, py, wp):  # pragma: no cover - numba
+    """:func:`cross_track` over the legs of ``wp`` (n, 2): the clamped projection on
+    each leg, the first nearest (the same operations as a vectorized numpy pass)."""
+    best = np.inf
+    k = 0
+    for i in range(wp.shape[0] - 1):
+        dx = wp[i + 1, 0] - wp[i, 0]
+        dy = wp[i + 1, 1] - wp[i, 1]
+        L2 = max(dx * dx + dy * dy, 1e-18)
+        t = min(max(((px - wp[i, 0]) * dx + (py - wp[i, 1]) * dy) / L2, 0.0), 1.0)
+        dist = np.hypot(wp[i, 0] + t * dx - px, wp[i, 1] + t * dy - py)
+        if dist < best or i == 0:
+            best = dist
+            k = i
+    dx = wp[k + 1, 0] - wp[k, 0]
+    dy = wp[k + 1, 1] - wp[k, 1]
+    n = math.sqrt(max(dx * dx + dy * dy, 1e-18))
+    return (dx * (py - wp[k, 1]) - dy * (px - wp[k, 0])) / n, math.atan2(dy, dx)
 
 
 __all__ = [

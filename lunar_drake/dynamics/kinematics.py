@@ -362,6 +362,15 @@ def explicit_steer_commands(
     _check_mode(mode, vx, vy, wz, tol)
     g = geometry
     px, py = g.p_BS[:, 0], g.p_BS[:, 1]
+    if vx.ndim == 0:  # one twist (the flight software's 50 Hz call): one compiled call
+        prev1 = np.zeros(px.shape) if previous_delta is None else previous_delta
+        prev1 = np.broadcast_to(np.asarray(prev1, np.float64), px.shape)
+        delta, omega, over, needed = _steer_one(
+            float(vx), float(vy), float(wz), px, py, np.ascontiguousarray(prev1),
+            g.effective_limit, g.steering_offset, g.wheel_radius, float(tol),
+        )  # fmt: skip
+        if clip or not over.any():
+            return SteerCommands(delta=delta, omega=omega, saturated=over, needed_delta=needed)
     vpx = vx[..., None] - wz[..., None] * py
     vpy = vy[..., None] + wz[..., None] * px
     prev = np.zeros(vpx.shape) if previous_delta is None else np.asarray(previous_delta, float)
@@ -394,6 +403,35 @@ def explicit_steer_commands(
     c, s = np.cos(delta), np.sin(delta)
     omega = (vpx * c + vpy * s - wz[..., None] * g.steering_offset) / g.wheel_radius
     return SteerCommands(delta=delta, omega=omega, saturated=over, needed_delta=needed)
+
+
+@numba.njit(cache=True)
+def _steer_one(vx, vy, wz, px, py, prev, lim, offset, radius, tol):  # pragma: no cover - numba
+    """:func:`explicit_steer_commands` of one twist: the same operations, wheel by wheel
+    (``delta, omega, saturated, needed_delta``)."""
+    n = px.size
+    delta = np.empty(n)
+    omega = np.empty(n)
+    over = np.zeros(n, np.bool_)
+    needed = np.empty(n)
+    for i in range(n):
+        vpx = vx - wz * py[i]
+        vpy = vy + wz * px[i]
+        d = np.arctan2(vpy, vpx)  # (-pi, pi]
+        if d > _HALF_PI:
+            d = d - math.pi
+        elif d < -_HALF_PI:
+            d = d + math.pi
+        if abs(abs(d) - _HALF_PI) < 1e-12 and d * prev[i] < 0:
+            d = -d  # exactly sideways: the sign nearer the previous angle
+        if not np.hypot(vpx, vpy) > tol:
+            d = prev[i]
+        over[i] = abs(d) > lim[i] + _LIMIT_SLACK
+        needed[i] = d
+        d = min(max(d, -lim[i]), lim[i])
+        delta[i] = d
+        omega[i] = (vpx * np.cos(d) + vpy * np.sin(d) - wz * offset[i]) / radius[i]
+    return delta, omega, over, needed
 
 
 def explicit_steer_twist(delta, omega, *, geometry: WheelGeometry) -> np.ndarray:
