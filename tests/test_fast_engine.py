@@ -355,3 +355,27 @@ def test_engines_agree_under_spotlights_and_wheel_tracks():
     assert a.radiance[t].max() > 10 * np.median(a.radiance[t])  # the beam stands out
     rel = np.abs(a.radiance[t] - b.radiance[t]) / np.maximum(b.radiance[t], 1e-5)
     assert np.median(rel) < 0.02
+
+
+def test_track_gradients_are_read_only_where_the_raster_reaches():
+    """A track raster over part of the view: the shader reads its gradients only at
+    pixels the raster reaches (0 elsewhere). With two rings of zeros at its edge, the
+    same raster clamped at its edge (``outside=None``: every pixel reads it) gives the
+    same bits."""
+    hf = _bumpy(128)
+    z = float(hf.height(np.array([-3.0]), np.array([0.0]))[0])
+    X = _pose([-3.0, 0.0, z + 1.5], tilt_deg=25.0)
+    depth = np.zeros((60, 40), np.float32)  # 3 m x 2 m at 5 cm, ahead and to one side
+    depth[10:50, 8:14] = 0.02  # a groove
+    depth[10:50, 20:23] = 0.01
+    bounds = (-1.0, -1.5, 1.0, 1.5)
+    r = _renderers(hf, [])["heightfield"]
+    il, _ = r.illumination(sun_dir_W=(0.5, 0.3, 0.3))
+    imgs = {}
+    for outside in (0.0, None):
+        tracks = RasterSampler(depth, bounds=bounds, outside=outside)
+        imgs[outside] = r.shade(X_WC=X, illumination=il, track_depth=tracks)
+    flat = r.shade(X_WC=X, illumination=il)
+    a, b = imgs[0.0], imgs[None]
+    assert a.radiance.tobytes() == b.radiance.tobytes()
+    assert (a.radiance != flat.radiance).sum() > 200  # the grooves show

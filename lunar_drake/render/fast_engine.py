@@ -259,6 +259,8 @@ def _shade_terrain(
         X = np.empty(width)
         Y = np.empty(width)
         Z = np.empty(width)
+        GX = np.empty(width)
+        GY = np.empty(width)
         NX = np.empty(width, np.float32)
         NY = np.empty(width, np.float32)
         NZ = np.empty(width, np.float32)
@@ -350,13 +352,32 @@ def _shade_terrain(
                 alb = w00 * T8[2, j] + w01 * T8[5, j] + w10 * T8[8, j] + w11 * T8[11, j]
                 AF[j] = alb * np.float32(afac_scale)
             if use_bump:
+                # the track gradients: read only where the raster reaches (elsewhere they
+                # are its outside value, 0), then the bump on every pixel
+                gh = gxa.shape[0]
+                gw = gxa.shape[1]
+                nin = 0
+                for j in range(n):
+                    GX[j] = gpar[5]
+                    GY[j] = gpar[5]
+                    col = (X[j] - gpar[2]) * gpar[0] - 0.5
+                    row_ = (gpar[3] - Y[j]) * gpar[1] - 0.5
+                    if gpar[4] == 0.0 or not (
+                        row_ < -0.5 or row_ > gh - 0.5 or col < -0.5 or col > gw - 0.5
+                    ):
+                        KI[nin] = j
+                        nin += 1
+                for m in range(nin):
+                    j = KI[m]
+                    GX[j] = _tex(gxa, gpar, X[j], Y[j])
+                    GY[j] = _tex(gya, gpar, X[j], Y[j])
                 for j in range(n):
                     nx = NX[j]
                     ny = NY[j]
                     nz = math.sqrt(min(max(1.0 - nx * nx - ny * ny, 1e-6), 1.0))
                     if nz > 1e-3:
-                        bx = nx / nz + _tex(gxa, gpar, X[j], Y[j])
-                        by = ny / nz + _tex(gya, gpar, X[j], Y[j])
+                        bx = nx / nz + GX[j]
+                        by = ny / nz + GY[j]
                         inv = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
                         NX[j] = bx * inv
                         NY[j] = by * inv
