@@ -296,5 +296,5 @@ def test_cross_track_compiled_gives_the_vectorized_bits():
         wp[n // 2] = wp[n // 2 - 1]  # a repeated waypoint: a zero-length leg
         for p in np.r_[rng.uniform(wp.min() - 5, wp.max() + 5, (50, 2)), wp]:
             assert cross_track(p, wp) == numpy_cross_track(p, wp)
-    with pytest.raises(ValueError, match="n >= 2"):
+    with pytest.raises(ConfigError, match="n >= 2"):
         cross_track((0.0, 0.0), [[1.0, 2.0]])

@@ -457,5 +457,9 @@ def test_tracked_window_samples_as_the_whole_window():
         np.testing.assert_allclose(g_cut, g_full, atol=2e-4)  # m/m; slopes reach ~1
         assert np.abs(g_full).max() > 0.1
     assert r.tracked_window(left=10, bottom=10, right=11, top=11) is None
-    with pytest.raises(OutOfRangeError):
+    with pytest.raises(OutOfRangeError, match="window"):
         r.tracked_window(left=1, bottom=0, right=0, top=1)
+    with pytest.raises(OutOfRangeError, match="window"):
+        r.tracked_window(left=float("nan"), bottom=0, right=1, top=1)
+    with pytest.raises(OutOfRangeError, match="margin_cells = -1"):
+        r.tracked_window(**win, margin_cells=-1)

@@ -223,7 +223,7 @@ def cross_track(xy, waypoints) -> tuple[float, float]:
     p = np.asarray(xy, dtype=float)
     wp = np.ascontiguousarray(waypoints, dtype=float)
     if wp.ndim != 2 or wp.shape[0] < 2 or wp.shape[1] != 2:
-        raise ValueError(f"waypoints have shape {wp.shape}; a path of (n >= 2, 2) is required")
+        raise ConfigError(f"waypoints have shape {wp.shape}; a path of (n >= 2, 2) is required")
     e, heading = _cross_track(float(p[0]), float(p[1]), wp)
     return float(e), float(heading)
 

@@ -435,6 +435,11 @@ class TrackRaster:
         bounds=bounds, outside=0.0)`` matches :meth:`depth_at` away from the edges and
         gives the shader analytic gradients).
         """
+        return self._cells(*self._cell_span(left, bottom, right, top))
+
+    def _cell_span(self, left, bottom, right, top) -> tuple[int, int, int, int]:
+        """``(ix_lo, ix_hi, iy_lo, iy_hi)``: the global cells covering a site rectangle (m),
+        snapped outward. Raises OutOfRangeError for a non-finite or empty rectangle."""
         lo = (float(left), float(bottom), float(right), float(top))
         if not all(math.isfinite(v) for v in lo) or not (lo[2] > lo[0] and lo[3] > lo[1]):
             raise OutOfRangeError(
@@ -442,9 +447,8 @@ class TrackRaster:
                 "values with right > left and top > bottom (m)"
             )
         c = self._c
-        ix_lo, ix_hi = math.floor(lo[0] / c), math.ceil(lo[2] / c) - 1
-        iy_lo, iy_hi = math.floor(lo[1] / c), math.ceil(lo[3] / c) - 1
-        return self._cells(ix_lo, ix_hi, iy_lo, iy_hi)
+        return (math.floor(lo[0] / c), math.ceil(lo[2] / c) - 1,
+                math.floor(lo[1] / c), math.ceil(lo[3] / c) - 1)  # fmt: skip
 
     def _cells(self, ix_lo: int, ix_hi: int, iy_lo: int, iy_hi: int):
         """:meth:`window` of the global cells ``ix_lo..ix_hi`` x ``iy_lo..iy_hi``."""
@@ -474,12 +478,12 @@ class TrackRaster:
         everywhere (both 0 off the tiles), at a fraction of its cells -- a camera's
         50 m window holds 6.8 M cells at 2 cm, the rover's recent tracks a few tiles.
         """
-        c, T = self._c, self._T
-        lo = (float(left), float(bottom), float(right), float(top))
-        if not all(math.isfinite(v) for v in lo) or not (lo[2] > lo[0] and lo[3] > lo[1]):
-            return self.window(left=left, bottom=bottom, right=right, top=top)  # its error
-        ix_lo, ix_hi = math.floor(lo[0] / c), math.ceil(lo[2] / c) - 1
-        iy_lo, iy_hi = math.floor(lo[1] / c), math.ceil(lo[3] / c) - 1
+        if int(margin_cells) != margin_cells or margin_cells < 0:
+            raise OutOfRangeError(
+                f"margin_cells = {margin_cells!r} is invalid; an integer >= 0 is required"
+            )
+        T = self._T
+        ix_lo, ix_hi, iy_lo, iy_hi = self._cell_span(left, bottom, right, top)
         hit = [
             (tr, tc)
             for tr, tc in self._tiles

@@ -615,18 +615,13 @@ class Heightfield:
         ``margin_m`` inside its edge, non-finite points and points touching nodata get
         ``ok`` False and height -inf instead of an error. Compiled for in-memory rasters."""
         xx, yy = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
-        b = self.bounds
-        lo_x, hi_x, lo_y, hi_y = (
-            b.left + margin_m,
-            b.right - margin_m,
-            b.bottom + margin_m,
-            b.top - margin_m,
-        )
-        if isinstance(self._src, _ArraySource):
-            z, ok = heights_in_box(
-                self._src.z, xx.ravel(), yy.ravel(), self.resolution_m, lo_x, hi_x, lo_y, hi_y
-            )
+        kernel = self.within_kernel_args(margin_m=margin_m)
+        if kernel is not None:
+            z, ok = heights_in_box(kernel[0], xx.ravel(), yy.ravel(), *kernel[1:])
             return z.reshape(xx.shape), ok.reshape(xx.shape)
+        b = self.bounds
+        lo_x, hi_x = b.left + margin_m, b.right - margin_m
+        lo_y, hi_y = b.bottom + margin_m, b.top - margin_m
         ok = (xx >= lo_x) & (xx <= hi_x) & (yy >= lo_y) & (yy <= hi_y)
         z = np.full(xx.shape, -np.inf)
         if ok.all():
