@@ -253,3 +253,65 @@ def test_lightmap_source_interpolates_baked_maps_lazily():
     np.testing.assert_allclose(mid, 0.5 * (src.lightmap_at(0.0) + direct), atol=1e-6)
     with pytest.raises(OOR, match="outside"):
         src.lightmap_at(9000.0)
+
+
+def test_delayed_frames_render_on_the_worker_thread_with_the_same_bytes(small_site, monkeypatch):
+    """With a delivery delay the camera renders on its worker thread while the simulation
+    goes on; the delivered frames are the bytes of a render in the update itself."""
+    import threading
+
+    from lunar_drake.scenario_files import apply_overrides
+    from lunar_drake.systems import hapke_camera
+
+    scenario, site = small_site
+    s = apply_overrides(
+        scenario, "{sensors: {camera: {width: 64, height: 48, rate_hz: 2.0, delay_s: 0.7}}}"
+    )
+    threads = set()
+    shade = TerrainCameraRenderer.shade
+
+    def recording_shade(self, **kw):
+        threads.add(threading.current_thread().name)
+        return shade(self, **kw)
+
+    monkeypatch.setattr(TerrainCameraRenderer, "shade", recording_shade)
+    out = {}
+    for mode in ("worker", "in place"):
+        if mode == "in place":
+            monkeypatch.setattr(hapke_camera, "concurrent_kernels_safe", lambda: False)
+        threads.clear()
+        _, _, cam, ctx = _camera_after(s, site, 1.75)
+        ring = ctx.get_abstract_state(0).get_value()
+        pending = [isinstance(e, hapke_camera.PendingFrames) for e in ring]
+        out[mode] = {n: cam.frame(ctx, n) for n in ("left", "right")}
+        if mode == "worker":
+            assert (
+                all(pending)
+                and threads
+                and all(t.startswith("lunar_drake.camera") for t in threads)
+            ), (pending, threads)
+        else:
+            assert not any(pending) and threads == {threading.current_thread().name}
+    for n in ("left", "right"):
+        a, b = out["worker"][n], out["in place"][n]
+        assert a.index == b.index == 2
+        for field in ("raw", "depth", "label", "radiance"):
+            assert np.array_equal(getattr(a, field), getattr(b, field)), (n, field)
+
+
+def test_an_error_in_a_deferred_render_reaches_the_reader(small_site, monkeypatch):
+    from lunar_drake.errors import SimulationError
+    from lunar_drake.scenario_files import apply_overrides
+
+    scenario, site = small_site
+    s = apply_overrides(
+        scenario, "{sensors: {camera: {width: 32, height: 24, rate_hz: 2.0, delay_s: 0.3}}}"
+    )
+
+    def failing_shade(self, **kw):
+        raise SimulationError("render failed")
+
+    monkeypatch.setattr(TerrainCameraRenderer, "shade", failing_shade)
+    with pytest.raises(SimulationError, match="render failed"):
+        _, _, cam, ctx = _camera_after(s, site, 0.4)
+        cam.frame(ctx, "left")

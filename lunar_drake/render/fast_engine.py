@@ -222,7 +222,7 @@ def _row_max(a, n):
     return m
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
+@numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _shade_terrain(
     t, R, fx, fy, cx, cy, skip, width, height, cam,
     surf, spar, afac_scale,

@@ -152,7 +152,7 @@ def lut_reflectance(table, ci, ce, cg):
     )
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
+@numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _lookup_many(table, ci, ce, cg, out):
     for i in numba.prange(out.size):
         out[i] = lut_reflectance(table, ci[i], ce[i], cg[i]) if ci[i] > 0.0 else 0.0

@@ -306,7 +306,7 @@ def _level(offs, hs, ws, cxs, cys, lev):
     return offs[lev], hs[lev], ws[lev], cxs[lev], cys[lev]
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
+@numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, nwork):
     """AZ[k, b] = (running max of the elevation slope, terrain height) along bin b.
 
@@ -450,7 +450,7 @@ def _bisect_first(AZ, b, s, lo, hi):
     return hi
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
+@numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _pixels(
     packed, R, px, py, pz, fx, fy, cx, cy, width, height,
     th_ref, th_lo, dth, nb, bcos, bsin, ds, lv, AZ, kend, iters, z_below, t_out, lev_out, nwork,

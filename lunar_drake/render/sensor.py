@@ -586,7 +586,7 @@ def _row_adc(n_e, hi, kr, full_well, read_noise, conv, black, max_code, shift, o
         out[c] = np.uint16(np.int64(dn) << shift)
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False)
+@numba.njit(parallel=True, cache=True, fastmath=False, nogil=True)
 def _expose_kernel(  # pragma: no cover - compiled
     L, scale, keys, rate, dark_e, full_well, read_noise, conv, black, max_code, shift, out, bad,
     nwork,

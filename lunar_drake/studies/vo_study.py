@@ -239,6 +239,7 @@ def _scenario_for(config: VoStudyConfig, seed: int, site=None):
     cam.enabled = True
     cam.width, cam.height = config.width, config.height
     cam.rate_hz = 1.0
+    cam.delay_s = 0.0  # the study reads each frame at its capture instant
     if config.fov_y_deg is not None:
         cam.fov_y_deg = float(config.fov_y_deg)
     cam.validate()

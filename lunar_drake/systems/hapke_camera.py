@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import dataclasses as dc
 import functools
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 
+import numba
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import QueryObject, Role
@@ -17,6 +20,7 @@ from lunar_drake.errors import LunarDrakeError, OutOfRangeError, SimulationError
 from lunar_drake.render import sensor as sensor_mod
 from lunar_drake.render.camera import AU_KM, TerrainCameraRenderer
 from lunar_drake.render.raycast import DynamicMesh
+from lunar_drake.render.row_queue import workers
 from lunar_drake.render.shapes import shape_mesh
 from lunar_drake.sensors.sampling import delivered_index, samples_in_flight
 
@@ -60,6 +64,59 @@ class Frame:
         return self
 
 
+class PendingFrames:
+    """The frames of one capture (camera name -> :class:`Frame`), rendered on the
+    camera's worker thread: ``index`` and ``time_s`` at once, the frames on first use
+    (:meth:`frames` waits for them; an error in the render is raised there). Kept in
+    abstract state without copies."""
+
+    __slots__ = ("_future", "index", "time_s")
+
+    def __init__(self, *, index: int, time_s: float, future: Future):
+        self.index = int(index)
+        self.time_s = float(time_s)
+        self._future = future
+
+    def frames(self) -> dict:
+        return self._future.result()
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+def _entry_index(entry) -> int:
+    """The frame index of a ring entry (a dict of Frames or PendingFrames)."""
+    if isinstance(entry, PendingFrames):
+        return entry.index
+    return next(iter(entry.values())).index
+
+
+_LAYER_CHECKED: list[bool] = []
+_LAYER_LOCK = threading.Lock()
+
+
+def concurrent_kernels_safe() -> bool:
+    """Whether numba's threading layer lets two Python threads launch parallel kernels
+    at once (OpenMP and TBB do; the ``workqueue`` fallback aborts the process)."""
+    with _LAYER_LOCK:
+        if not _LAYER_CHECKED:
+            _probe(np.zeros(4), workers())  # a parallel kernel selects the layer
+            _LAYER_CHECKED.append(numba.threading_layer() != "workqueue")
+        return _LAYER_CHECKED[0]
+
+
+@numba.njit(parallel=True, cache=True)
+def _probe(a, nwork):  # pragma: no cover - compiled
+    for i in numba.prange(nwork):
+        a[i % a.size] = i
+
+
+def _leave_one_core():
+    """The worker thread's numba threads: all but one (at least one), leaving the
+    simulation a core."""
+    numba.set_num_threads(max(int(numba.config.NUMBA_NUM_THREADS) - 1, 1))
+
+
 def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exclude_bodies=()):
     """Illustration geometry of a model instance as (GeometryId, DynamicMesh) pairs,
     leaving out ``exclude_bodies`` (e.g. the camera head the cameras sit inside)."""
@@ -86,6 +143,14 @@ class HapkeCamera(LeafSystem):
     Frame k (taken at t_k = k / rate_hz) is delivered at t_k + ``delay_s``: the outputs
     show the latest delivered frame (blank, index -1, before the first), as every
     sensor does (:class:`~lunar_drake.systems.sampled_sensor.SampledSensor`).
+
+    With ``delay_s > 0`` a frame is rendered on the camera's own worker thread while the
+    simulation goes on (its inputs -- poses, lights, the lightmap, a copy of the tracks
+    near the camera -- are taken at the capture instant, so the result is the same
+    bytes as a render in place), and the outputs wait for it only if it is not done by
+    its delivery; the worker runs numba's kernels on all cores but one, leaving the
+    simulation its own. With ``delay_s = 0`` (or where numba's threading layer cannot run
+    kernels from two threads) it renders in the update itself, on every core.
 
     .. pydrake_system::
 
@@ -143,6 +208,7 @@ class HapkeCamera(LeafSystem):
         self._delay = float(delay_s)
         self._depth = samples_in_flight(rate_hz=rate_hz, delay_s=delay_s)
         self._r = renderer
+        self._pool = None  # the worker thread, started by the first deferred render
         self._mounts = list(mounts)
         self._gids = [g for g, _ in rover_geometry]
         self._lights = list(lights)
@@ -205,20 +271,26 @@ class HapkeCamera(LeafSystem):
         self.frame_index_output = self.DeclareVectorOutputPort(
             "frame_index",
             BasicVector(1),
-            lambda c, o: o.SetFromVector([next(iter(self._frames(c).values())).index]),
+            lambda c, o: o.SetFromVector([_entry_index(self._delivered(c))]),
             prerequisites_of_calc=prereq,
         )
 
-    def _frames(self, context) -> dict:
-        """The frames delivered by the context's time (camera name -> Frame)."""
+    def _delivered(self, context):
+        """The ring entry delivered by the context's time (a dict camera name -> Frame,
+        or PendingFrames)."""
         ring = context.get_abstract_state(self._state).get_value()
         if self._depth == 1:
             return ring[0]
         k = delivered_index(context.get_time(), rate_hz=self._rate, delay_s=self._delay)
         if k < 0:
             return self._blank
-        newest = next(iter(ring[0].values())).index
+        newest = _entry_index(ring[0])
         return ring[min(max(newest - k, 0), self._depth - 1)]
+
+    def _frames(self, context) -> dict:
+        """The frames delivered by the context's time (camera name -> Frame)."""
+        entry = self._delivered(context)
+        return entry.frames() if isinstance(entry, PendingFrames) else entry
 
     @staticmethod
     def _to_image(output, cls, array):
@@ -274,7 +346,6 @@ class HapkeCamera(LeafSystem):
             spotlights=spots,
         )
         dyn = [query.GetPoseInWorld(g).GetAsMatrix4() for g in self._gids]
-        frames = {}
         X_WCs = [poses[int(mt.body_index)].multiply(mt.X_BC) for mt in self._mounts]
         # one track window for the rig (its cameras are centimetres apart), 1 m wider
         centre = np.mean([X.translation() for X in X_WCs], axis=0)
@@ -282,6 +353,35 @@ class HapkeCamera(LeafSystem):
         tracks = self._track_sampler(tracks_in, centre, half_m=25.0 + spread + 1.0)
         for mt, X_WC in zip(self._mounts, X_WCs, strict=True):
             self._check_above_terrain(mt.name, X_WC.translation(), t)
+        render = functools.partial(
+            self._render,
+            X_WCs=X_WCs,
+            illum=illum,
+            sun_up=sun_up,
+            dyn=dyn,
+            lightmap=lightmap,
+            tracks=tracks,
+            exposure_s=exposure_s,
+            gain=gain,
+            index=index,
+            t=t,
+        )
+        if self._delay > 0.0 and concurrent_kernels_safe():
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(
+                    1, thread_name_prefix="lunar_drake.camera", initializer=_leave_one_core
+                )
+            entry = PendingFrames(index=index, time_s=t, future=self._pool.submit(render))
+        else:
+            entry = render()
+        ring = context.get_abstract_state(self._state).get_value()
+        state.get_mutable_abstract_state(self._state).set_value((entry, *ring[:-1]))
+
+    def _render(self, *, X_WCs, illum, sun_up, dyn, lightmap, tracks, exposure_s, gain, index, t):
+        """The frames of one capture (camera name -> Frame) from inputs taken at its
+        instant; touches no Context (it may run on the worker thread)."""
+        frames = {}
+        for mt, X_WC in zip(self._mounts, X_WCs, strict=True):
             shaded = self._r.shade(
                 X_WC=X_WC,
                 illumination=illum,
@@ -306,8 +406,7 @@ class HapkeCamera(LeafSystem):
                 index=index,
                 sensor=self._r.sensor,
             )
-        ring = context.get_abstract_state(self._state).get_value()
-        state.get_mutable_abstract_state(self._state).set_value((frames, *ring[:-1]))
+        return frames
 
     @staticmethod
     def _track_sampler(tracks, p, half_m: float = 25.0):
