@@ -402,3 +402,62 @@ def test_a_mission_with_ground_perception_writes_its_keyframes_and_map(cache, tm
     assert len(pts) == sum(len(c.points_W) for c in logs.keyframe_clouds) > 100 * len(order)
     png = (tmp_path / "ground_map.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+
+
+def test_a_processing_time_delays_the_result_on_the_worker_thread_not_changes_it(scene):
+    """GroundPerception with ``processing_s``: a tick's frames are processed on the
+    worker thread and take effect at the first tick at or after ``t + processing_s``,
+    batches chained in order; the state is the one processing in the tick gives."""
+    import threading
+
+    from pydrake.systems.analysis import Simulator
+
+    from lunar_drake.comms.messages import Delivery, Message
+    from lunar_drake.systems import ground_perception as gp_mod
+    from lunar_drake.systems.ground_perception import GroundPerception
+
+    poses = [_pose6(0.0, 0.0, 0.0), _pose6(1.2, 0.0, 0.0), _pose6(2.4, 0.1, 0.05)]
+    frames = [scene["frame"](k, pose_matrix(p), p) for k, p in enumerate(poses)]
+    inbox = [
+        Delivery(message=Message(topic="images", seq=k, t_sent_s=float(k), payload=f,
+                                 size_bytes=f.size_bytes()), t_received_s=float(k))
+        for k, f in enumerate(frames)
+    ]  # fmt: skip
+    threads = set()
+    step = gp_mod.perception_step
+
+    def recording_step(*a, **kw):
+        threads.add(threading.current_thread().name)
+        return step(*a, **kw)
+
+    def run(processing_s):
+        system = GroundPerception(
+            config=PerceptionConfig(processing_s=processing_s), rate_hz=1.0,
+            calib=scene["calib"], description=krex2_rp(), prior_costmap=scene["prior"],
+            prior_dem=scene["dem"], rover=ROVER, hazards=HAZ,
+        )  # fmt: skip
+        sim = Simulator(system)
+        ctx = sim.get_mutable_context()
+        seen = []
+        # frames 0 and 1 arrive by t = 0, frame 2 by t = 1
+        for t_end, upto in ((0.5, 2), (1.5, 3), (2.5, 3), (3.5, 3)):
+            system.images_input.FixValue(ctx, tuple(inbox[:upto]))
+            sim.AdvanceTo(t_end)
+            seen.append(len(system.perception_state(ctx).records))
+        return system.perception_state(ctx), seen
+
+    gp_mod.perception_step = recording_step
+    try:
+        now, seen_now = run(0.0)
+        assert threads == {threading.current_thread().name}
+        threads.clear()
+        later, seen_later = run(1.5)
+        assert threads and all(t.startswith("lunar_drake.ground") for t in threads), threads
+    finally:
+        gp_mod.perception_step = step
+    # in the tick: 2 keyframe records at t = 0, 3 at t = 1; 1.5 s later: at t = 2 and 3
+    assert seen_now == [2, 3, 3, 3] and seen_later == [0, 0, 2, 3], (seen_now, seen_later)
+    assert [repr(r) for r in later.records.items()] == [repr(r) for r in now.records.items()]
+    assert np.array_equal(later.correction, now.correction) and later.last_seq == 2
+    assert np.array_equal(later.costmap.lethal_raw, now.costmap.lethal_raw)
+    assert later.version == now.version

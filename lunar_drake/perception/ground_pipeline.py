@@ -82,6 +82,10 @@ class PerceptionConfig:
             (``keyframe_points.npy``, ``/ground/points`` in ``run.mcap``), one per cube
             of this side (their centroid; m); 0: none kept. Recording only: nothing the
             ground decides reads them.
+        processing_s: how long the ground's computers take over the frames of one tick
+            (s): their results (pose correction, map, keyframe records) take effect this
+            long after the tick that took the frames in; 0: in that tick. With a
+            processing time the work runs on a worker thread meanwhile.
         use_vo: fuse VO into the ground's pose (else the on-board estimate alone).
         odom_sigma_fraction, odom_sigma_min_m: on-board translation sigma between
             keyframes: fraction of the distance, plus a floor (m). 5 %: on the
@@ -110,6 +114,7 @@ class PerceptionConfig:
     """
 
     enabled: bool = True
+    processing_s: float = 0.0
     keyframe_m: float = 1.0
     keyframe_deg: float = 10.0
     max_range_m: float = 6.0
@@ -131,6 +136,7 @@ class PerceptionConfig:
 
     def validate(self) -> None:
         """Checks every field; errors name the field."""
+        check_range("processing_s", self.processing_s, 0.0, 3600.0, unit=" s")
         check_range("keyframe_m", self.keyframe_m, 0.0, 100.0, unit=" m")
         check_range("keyframe_deg", self.keyframe_deg, 0.0, 180.0, unit=" deg")
         check_range("max_range_m", self.max_range_m, 1.0, 100.0, unit=" m")

@@ -3,6 +3,9 @@ frames through :func:`~lunar_drake.perception.ground_pipeline.perception_step`."
 
 from __future__ import annotations
 
+import functools
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -41,6 +44,22 @@ def camera_in_chassis_fn(description):
     return X_BC
 
 
+class _Batch:
+    """Frames in work on the ground's worker thread: when their result takes effect
+    (``t_ready``, s), its future, the last message seq they hold. Kept in abstract
+    state without copies."""
+
+    __slots__ = ("future", "last_seq", "t_ready")
+
+    def __init__(self, *, t_ready: float, future, last_seq: int):
+        self.t_ready = float(t_ready)
+        self.future = future
+        self.last_seq = int(last_seq)
+
+    def __deepcopy__(self, memo):
+        return self
+
+
 class GroundPerception(LeafSystem):
     """The ground's stereo, VO and mapping.
 
@@ -64,7 +83,15 @@ class GroundPerception(LeafSystem):
     ground_pipeline.PerceptionState.sigma_m`); ``costmap`` (abstract):
     (version, :class:`~lunar_drake.autonomy.costmap.Costmap`), the a-priori costmap
     with the stereo hazards merged in, ``version`` counting the keyframes that added
-    lethal cells. State (abstract): the PerceptionState.
+    lethal cells. State (abstract): the PerceptionState in effect, and the batches in
+    work: ((t_ready, future, last seq), ...).
+
+    With ``config.processing_s > 0`` a tick's frames are processed on this system's
+    worker thread and the result takes effect at the first tick at or after ``t +
+    processing_s`` (the outputs show the state in effect, never one in work); batches
+    chain in order (each starts from the one before). The result is the same state a
+    step in the tick would give, only later; it depends on simulated time alone, not on
+    how fast the worker is.
     """
 
     def __init__(self, *, config: PerceptionConfig, rate_hz: float, calib, description,
@@ -82,6 +109,8 @@ class GroundPerception(LeafSystem):
         self._state = self.DeclareAbstractState(
             AbstractValue.Make(PerceptionState(costmap=prior_costmap))
         )
+        self._work = self.DeclareAbstractState(AbstractValue.Make(()))
+        self._pool = None  # the worker thread, started by the first deferred batch
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
         self.pose_correction_output = self.DeclareVectorOutputPort(
             "pose_correction",
@@ -115,17 +144,45 @@ class GroundPerception(LeafSystem):
         return own.get_abstract_state(self._state).get_value()
 
     def _update(self, context, state):
+        t = context.get_time()
         st = context.get_abstract_state(self._state).get_value()
+        work = context.get_abstract_state(self._work).get_value()
+        # batches due by now take effect, in order
+        done = 0
+        while done < len(work) and work[done].t_ready <= t:
+            st = work[done].future.result()
+            done += 1
+        work = work[done:]
+        last_seq = work[-1].last_seq if work else st.last_seq
         new = [(d.message.seq, d.message.payload) for d in self.images_input.Eval(context)
-               if d.message.seq > st.last_seq]  # fmt: skip
-        if not new:
-            return
+               if d.message.seq > last_seq]  # fmt: skip
+        if new:
+            step = functools.partial(self._step, new=new)
+            delay = self._config.processing_s
+            if delay > 0.0:
+                if self._pool is None:
+                    self._pool = ThreadPoolExecutor(1, thread_name_prefix="lunar_drake.ground")
+                before = work[-1].future if work else None
+
+                def chained(before=before, st=st):
+                    return step(before.result() if before is not None else st)
+
+                batch = _Batch(t_ready=t + delay, future=self._pool.submit(chained),
+                               last_seq=new[-1][0])  # fmt: skip
+                work = (*work, batch)
+            else:
+                st = step(st)
+        state.get_mutable_abstract_state(self._state).set_value(st)
+        state.get_mutable_abstract_state(self._work).set_value(work)
+
+    def _step(self, st: PerceptionState, *, new) -> PerceptionState:
+        """One batch of frames through the pipeline (touches no Context: it may run on
+        the worker thread)."""
 
         def decode(buf, codec=new[0][1].codec):
             return decode_frame(buf, codec=codec, adc_bits=self._adc_bits)
 
-        st = perception_step(
+        return perception_step(
             st, new, calib=self._calib, camera_in_chassis=self._X_BC, decode=decode,
             prior=self._prior, rover=self._rover, hazards=self._hazards, config=self._config,
         )  # fmt: skip
-        state.get_mutable_abstract_state(self._state).set_value(st)
