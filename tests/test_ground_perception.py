@@ -356,7 +356,7 @@ def test_frames_between_keyframes_are_skipped(scene):
 @pytest.mark.parametrize(
     "field, value",
     [("keyframe_m", -1.0), ("window_m", 5.0), ("vo_sigma_m", 0.0), ("gimbal_settle_s", -1.0),
-     ("cloud_voxel_m", -0.1)],
+     ("cloud_voxel_m", -0.1), ("processing_s", -1.0), ("processing_s", float("nan"))],
 )
 def test_perception_config_errors_name_the_field(field, value):
     with pytest.raises(OutOfRangeError, match=field):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses as dc
 import functools
-import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numba
@@ -91,18 +90,12 @@ def _entry_index(entry) -> int:
     return next(iter(entry.values())).index
 
 
-_LAYER_CHECKED: list[bool] = []
-_LAYER_LOCK = threading.Lock()
-
-
+@functools.cache
 def concurrent_kernels_safe() -> bool:
     """Whether numba's threading layer lets two Python threads launch parallel kernels
     at once (OpenMP and TBB do; the ``workqueue`` fallback aborts the process)."""
-    with _LAYER_LOCK:
-        if not _LAYER_CHECKED:
-            _probe(np.zeros(4), workers())  # a parallel kernel selects the layer
-            _LAYER_CHECKED.append(numba.threading_layer() != "workqueue")
-        return _LAYER_CHECKED[0]
+    _probe(np.zeros(4), workers())  # a parallel kernel selects the layer
+    return numba.threading_layer() != "workqueue"
 
 
 @numba.njit(parallel=True, cache=True)
