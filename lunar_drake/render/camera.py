@@ -70,6 +70,9 @@ class CameraConfig:
         fill_fraction: indirect fill as a fraction of the direct sunlight (paper: ~3%).
         fill_fraction_sun_down: fill fraction when the Sun is below the horizon (light
             scattered from sunlit distant terrain; an assumption).
+        earthshine_min_fraction: earthshine fainter than this fraction of the solar
+            irradiance is left out (near new Earth, where it is at most a few hundredths
+            of a code on sunlit terrain; at full Earth it is about 8e-5).
         limb_blend_deg: [start, end] emission angles (deg) over which Hapke blends into
             Lunar-Lambert.
         normal_map_max_px: the smooth-shading normal map is built from the DEM decimated
@@ -97,6 +100,7 @@ class CameraConfig:
     lod_recenter_m: float = 10.0
     fill_fraction: float = 0.03
     fill_fraction_sun_down: float = 0.003
+    earthshine_min_fraction: float = 1e-5
     limb_blend_deg: list[float] = dc.field(default_factory=lambda: [84.0, 89.0])
     normal_map_max_px: int = 4096
     dem_max_px: int = 8192
@@ -125,6 +129,7 @@ class CameraConfig:
         check_range("lod_recenter_m", self.lod_recenter_m, 0.0, 10000.0, lo_open=True, unit=" m")
         check_range("fill_fraction", self.fill_fraction, 0.0, 1.0)
         check_range("fill_fraction_sun_down", self.fill_fraction_sun_down, 0.0, 1.0)
+        check_range("earthshine_min_fraction", self.earthshine_min_fraction, 0.0, 1.0)
         lb = self.limb_blend_deg
         if len(lb) != 2 or not 0.0 <= lb[0] < lb[1] <= 90.0:
             raise OutOfRangeError(
@@ -292,17 +297,20 @@ class TerrainCameraRenderer:
         plus the fill. Sun below it: no direct light; a weak fill
         (``fill_fraction_sun_down``) from sunlit distant terrain, arriving from the
         opposite azimuth at 5 deg elevation, unshadowed by the lightmap. Earthshine when
-        Earth is above the horizontal.
+        Earth is above the horizontal and its irradiance at least
+        ``earthshine_min_fraction`` of the Sun's.
         """
         sun = np.asarray(sun_dir_W, float)
         sun = sun / np.linalg.norm(sun)
         e_sun = (AU_KM / float(sun_distance_km)) ** 2
         earth, e_earth = None, 0.0
         if earth_dir_W is not None and float(np.asarray(earth_dir_W)[2]) > 0.0:
-            earth = tuple(float(v) for v in earth_dir_W)
-            e_earth = e_sun * earthshine_fraction(
+            f_earth = earthshine_fraction(
                 earth_distance_km=earth_distance_km, earth_phase=earth_phase
             )
+            if f_earth >= self.model.earthshine_min_fraction:
+                earth = tuple(float(v) for v in earth_dir_W)
+                e_earth = e_sun * f_earth
         spots = tuple(spotlights)
         if sun[2] > 0.0:
             return Illumination(
