@@ -104,12 +104,6 @@ def _probe(a, nwork):  # pragma: no cover - compiled
         a[i % a.size] = i
 
 
-def _leave_one_core():
-    """The worker thread's numba threads: all but one (at least one), leaving the
-    simulation a core."""
-    numba.set_num_threads(max(int(numba.config.NUMBA_NUM_THREADS) - 1, 1))
-
-
 def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exclude_bodies=()):
     """Illustration geometry of a model instance as (GeometryId, DynamicMesh) pairs,
     leaving out ``exclude_bodies`` (e.g. the camera head the cameras sit inside)."""
@@ -141,9 +135,9 @@ class HapkeCamera(LeafSystem):
     simulation goes on (its inputs -- poses, lights, the lightmap, a copy of the tracks
     near the camera -- are taken at the capture instant, so the result is the same
     bytes as a render in place), and the outputs wait for it only if it is not done by
-    its delivery; the worker runs numba's kernels on all cores but one, leaving the
-    simulation its own. With ``delay_s = 0`` (or where numba's threading layer cannot run
-    kernels from two threads) it renders in the update itself, on every core.
+    its delivery; the worker runs numba's kernels on every core, which the operating
+    system shares with the simulation. With ``delay_s = 0`` (or where numba's threading
+    layer cannot run kernels from two threads) it renders in the update itself.
 
     .. pydrake_system::
 
@@ -361,9 +355,10 @@ class HapkeCamera(LeafSystem):
         )
         if self._delay > 0.0 and concurrent_kernels_safe():
             if self._pool is None:
-                self._pool = ThreadPoolExecutor(
-                    1, thread_name_prefix="lunar_drake.camera", initializer=_leave_one_core
-                )
+                # numba's kernels run on every core from the worker too: while the
+                # simulation waits for a frame, both render; while it runs, the OS shares
+                # them (all but one core left frames late: measured in docs/design.md)
+                self._pool = ThreadPoolExecutor(1, thread_name_prefix="lunar_drake.camera")
             entry = PendingFrames(index=index, time_s=t, future=self._pool.submit(render))
         else:
             entry = render()
