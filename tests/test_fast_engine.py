@@ -297,6 +297,35 @@ def test_engines_agree_on_a_bumpy_site_with_a_rover_and_its_shadow():
     assert again.radiance.tobytes() == a.radiance.tobytes()
 
 
+def test_earthshine_fainter_than_the_threshold_is_left_out():
+    """Earthshine is 0.3 (R_E / d)^2 x phase of sunlight (a Lambert sphere): below
+    ``earthshine_min_fraction`` (1e-5) no Earth light is passed to the shading; at or
+    above it, that irradiance; with the threshold 0 even the faint one; an Earth below
+    the horizon never."""
+    import dataclasses as dc
+
+    hf = _bumpy(n=64)
+    r = _renderers(hf, [])["heightfield"]
+    r0 = TerrainCameraRenderer(
+        heightfield=hf, model=dc.replace(r.model, earthshine_min_fraction=0.0)
+    )
+    sun, earth, d_km = (-0.6, 0.75, 0.28), (0.2, -0.3, 0.93), 384_400.0
+
+    def earth_light(renderer, phase, direction=earth):
+        il, _ = renderer.illumination(sun_dir_W=sun, earth_dir_W=direction,
+                                      earth_distance_km=d_km, earth_phase=phase)  # fmt: skip
+        return il.earth_direction_W, il.earth_irradiance
+
+    fraction = 0.3 * (6371.0 / d_km) ** 2  # of sunlight at full phase: 8.2e-5
+    faint, bright = 0.5e-5 / fraction, 2e-5 / fraction  # phases 0.06 and 0.24
+    assert earth_light(r, faint) == (None, 0.0)
+    direction, e = earth_light(r, bright)
+    assert np.allclose(direction, np.array(earth) / np.linalg.norm(earth))
+    assert e == pytest.approx(2e-5, rel=1e-9)
+    assert earth_light(r0, faint)[1] == pytest.approx(0.5e-5, rel=1e-9)
+    assert earth_light(r0, 1.0, direction=(0.2, -0.3, -0.93)) == (None, 0.0)
+
+
 def test_frames_are_bit_identical_whatever_the_thread_count():
     # rows and profile groups go to the threads through a shared queue (row_queue): which
     # thread renders a row must not change a byte, rover shadow candidates included
