@@ -22,12 +22,19 @@ time, its calls per simulated second and its share; **the rest** is the instrume
 run's CPU time that no Python method of ours accounts for: Drake's simulator loop, the
 plant's own discrete step, event dispatch, cache invalidation and pybind11's calls into
 Python. ``--by-method`` gives a row per method instead. The rest per step bounds the
-real-time factor any speed-up of our Python code could reach: ``step / rest``. The
+real-time factor any speed-up of our Python code could reach: ``step / rest``. A
+tighter bound: a ring of trivial Python systems (each a 100 Hz update that reads one
+input port and writes its state) times the cheapest such an update can be on this
+machine (:func:`trivial_call_cost`): ``floor_ms_per_step`` = the rest + the calls Drake
+makes into our methods a step (those entered with no timed method running; calls that
+Drake makes from inside one, through an ``Eval``, are not counted, so the floor stays a
+lower bound) x that update's own time (its Drake side is already in the rest). The
 timers cost a little themselves (mostly charged to the methods): compare the two runs'
 rates, printed on the first line.
 
 JSON ``{plain, instrumented, systems: [{name, ms_per_step, calls_per_s, share}], rest,
-bound_rtf, speed_index_s, ...}``.
+bound_rtf, trivial_system, calls_per_step, floor_ms_per_step, floor_rtf, speed_index_s,
+...}``.
 """
 
 from __future__ import annotations
@@ -59,6 +66,7 @@ class Ledger:
 
         self.seconds = collections.defaultdict(float)
         self.calls = collections.Counter()
+        self.drake_calls = 0  # calls entered with no timed method running: from Drake
         self._stack: list[float] = []
         self._thread = threading.get_ident()
         self._get_ident = threading.get_ident
@@ -67,15 +75,19 @@ class Ledger:
     def clear(self) -> None:
         self.seconds.clear()
         self.calls.clear()
+        self.drake_calls = 0
 
     def wrap(self, fn, label: str):
         """``fn`` with its calls' exclusive time charged to ``label``."""
         clock, stack, seconds, calls = self._clock, self._stack, self.seconds, self.calls
         me, ident = self._thread, self._get_ident
+        ledger = self
 
         def timed(*args, **kwargs):
             if ident() != me:
                 return fn(*args, **kwargs)
+            if not stack:
+                ledger.drake_calls += 1
             t0 = clock()
             stack.append(0.0)
             try:
@@ -125,6 +137,45 @@ def instrument(ledger: Ledger, classes, *, by_method: bool = False) -> list:
 def restore(undo) -> None:
     for cls, name, attr in undo:
         setattr(cls, name, attr)
+
+
+def trivial_call_cost(*, systems: int = 10, sim_s: float = 20.0, step_s: float = 0.01) -> dict:
+    """The cheapest a useful Python system's update is here: a ring of ``systems``
+    LeafSystems, each with a periodic discrete update (``step_s``) that reads its
+    10-vector input port and writes its state (the next one's input), simulated
+    ``sim_s``. ``body_s`` is the update's own time (timed inside it, like a method in
+    the table), ``dispatch_s`` the rest of the CPU time, per call."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+    body = [0.0]
+    clock = time.perf_counter
+
+    class Trivial(LeafSystem):
+        def __init__(self):
+            super().__init__()
+            self.u = self.DeclareVectorInputPort("u", 10)
+            state = self.DeclareDiscreteState(10)
+            self.DeclareStateOutputPort("y", state)
+            self.DeclarePeriodicDiscreteUpdateEvent(step_s, 0.0, self._update)
+
+        def _update(self, context, discrete_state):
+            t0 = clock()
+            discrete_state.set_value(0, self.u.Eval(context) * 0.5 + 1.0)
+            body[0] += clock() - t0
+
+    builder = DiagramBuilder()
+    ring = [builder.AddSystem(Trivial()) for _ in range(systems)]
+    for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
+        builder.Connect(a.get_output_port(), b.get_input_port())
+    sim = Simulator(builder.Build())
+    sim.Initialize()
+    c0 = time.process_time()
+    sim.AdvanceTo(sim_s)
+    cpu = time.process_time() - c0
+    calls = systems * round(sim_s / step_s)
+    return {"systems": systems, "sim_s": sim_s, "cpu_s": cpu, "calls": calls,
+            "body_s": body[0] / calls, "dispatch_s": (cpu - body[0]) / calls}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -202,6 +253,9 @@ def main(argv=None) -> int:
     rest = max(total - ours, 0.0)
     rest_ms = rest * 1e3 * per_step
     bound = a.step_ms / rest_ms if rest_ms > 0 else None
+    trivial = trivial_call_cost()
+    calls_per_step = ledger.drake_calls * a.step_ms * 1e-3 / a.sim_s
+    floor_ms = rest_ms + calls_per_step * trivial["body_s"] * 1e3
     speed = measure_speed_index()
     result = {
         "benchmark": "step_budget",
@@ -215,6 +269,10 @@ def main(argv=None) -> int:
         "python_ms_per_step": ours * 1e3 * per_step,
         "rest": {"ms_per_step": rest_ms, "share": rest / total},
         "bound_rtf": bound,
+        "trivial_system": trivial,
+        "calls_per_step": calls_per_step,
+        "floor_ms_per_step": floor_ms,
+        "floor_rtf": a.step_ms / floor_ms,
         "cpu_count": os.cpu_count(),
         "speed_index_s": speed["speed_index_s"],
         "speed_index": speed,
@@ -235,6 +293,10 @@ def main(argv=None) -> int:
     if bound:
         print(f"with our Python methods free, a step would cost {rest_ms:.3f} ms: at most "
               f"{bound:.1f}x real time")  # fmt: skip
+    print(f"a trivial Python system's update: {trivial['body_s'] * 1e6:.1f} us in its body, "
+          f"{trivial['dispatch_s'] * 1e6:.1f} us in Drake; with each of the {calls_per_step:.1f} "
+          f"calls Drake makes into our methods a step that cheap, a step would cost "
+          f"{floor_ms:.3f} ms: at most {a.step_ms / floor_ms:.1f}x")  # fmt: skip
     print(speed_index_line(speed))
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")

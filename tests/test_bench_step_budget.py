@@ -41,6 +41,7 @@ def test_nested_calls_are_charged_exclusively():
     assert ledger.seconds["A"] == pytest.approx(1.5)
     assert ledger.seconds["B"] == pytest.approx(9.0)
     assert ledger.calls == {"A": 1, "B": 3}
+    assert ledger.drake_calls == 2  # outer, and the second inner: entered with none running
     assert sum(ledger.seconds.values()) == pytest.approx(clock.t)
 
 
@@ -84,5 +85,13 @@ def test_a_short_run_accounts_for_its_cpu_time(tmp_path, capsys):
     assert 0 < r["python_ms_per_step"] < step_cpu
     assert r["rest"]["ms_per_step"] == pytest.approx(step_cpu - r["python_ms_per_step"])
     assert r["bound_rtf"] == pytest.approx(r["step_ms"] / r["rest"]["ms_per_step"])
+    # the floor adds the calls Drake makes (at least the contact's and executor's updates)
+    # at a trivial update's body each: between the rest and the step's CPU time
+    tr = r["trivial_system"]
+    assert tr["calls"] == tr["systems"] * round(tr["sim_s"] / 0.01)
+    assert 0 < tr["body_s"] and 0 < tr["dispatch_s"]
+    assert r["calls_per_step"] >= 1 + 0.5  # contact every step, executor every other
+    assert r["rest"]["ms_per_step"] < r["floor_ms_per_step"] < step_cpu
+    assert r["floor_rtf"] == pytest.approx(r["step_ms"] / r["floor_ms_per_step"])
     assert r["plain"]["final_xy_m"] == r["instrumented"]["final_xy_m"]
     assert "the rest (Drake, plant, bindings)" in capsys.readouterr().out
