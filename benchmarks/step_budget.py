@@ -5,36 +5,36 @@
 
 Builds the scenario's mission diagram (default: the default scenario without cameras,
 what ``mission_rate.py --no-cameras`` times), runs an untimed ``--warmup-s``, then
-``--sim-s`` simulated seconds twice from fresh contexts:
+``--sim-s`` simulated seconds twice from fresh contexts, timing the thread that runs
+the simulator by one clock, wall seconds (its CPU time, and other threads' -- the
+camera's worker when there is one -- are reported apart):
 
-1. **plain**: CPU seconds of this process, nothing instrumented (the real-time factor
-   the breakdown below belongs to);
-2. **instrumented**: every method of every ``LeafSystem`` class in
-   :mod:`lunar_drake.systems` is wrapped in a timer before the diagram is built, and
-   each call's *exclusive* wall time (its own, less that of the wrapped methods it
-   calls) is charged to its class. Work a method does in Drake (an input port's
-   ``Eval`` that computes another system's output in C++, the ``MultibodyPlant``'s
-   ports) or in the functional core (``executor_step``, the numba kernels) is charged
-   to the method that asked for it.
+1. **plain**: nothing instrumented (the real-time factor the breakdown belongs to);
+2. **instrumented**: before the diagram is built, every method of every ``LeafSystem``
+   class in :mod:`lunar_drake.systems` is wrapped in a timer, and so are the
+   output-port calculators those classes declare with lambdas. Each call's
+   *exclusive* time (its own, less that of the timed calls inside it) is charged to
+   the class of its system. Work a method asks of Drake (an input port's
+   ``Eval``, the ``MultibodyPlant``'s ports) or of the functional core
+   (``executor_step``, the numba kernels) is charged to that method.
 
 The table lists each class's ms per ``--step-ms`` (10 ms, the plant's step) of simulated
-time, its calls per simulated second and its share; **the rest** is the instrumented
-run's CPU time that no Python method of ours accounts for: Drake's simulator loop, the
-plant's own discrete step, event dispatch, cache invalidation and pybind11's calls into
-Python. ``--by-method`` gives a row per method instead. The rest per step bounds the
-real-time factor any speed-up of our Python code could reach: ``step / rest``. A
-tighter bound: a ring of trivial Python systems (each a 100 Hz update that reads one
-input port and writes its state) times the cheapest such an update can be on this
-machine (:func:`trivial_call_cost`): ``floor_ms_per_step`` = the rest + the calls Drake
-makes into our methods a step (those entered with no timed method running; calls that
-Drake makes from inside one, through an ``Eval``, are not counted, so the floor stays a
-lower bound) x that update's own time (its Drake side is already in the rest). The
-timers cost a little themselves (mostly charged to the methods): compare the two runs'
-rates, printed on the first line.
+time, its calls per simulated second and its share. **The rest** is the run's time that
+none of our Python accounts for: Drake's simulator loop, the plant's own step,
+event dispatch, cache invalidation and pybind11's calls into Python (the timers' own
+cost outside what they charge, measured by :func:`wrapper_overhead_s`, is taken out of
+it). ``--by-method`` gives a row per method or output port. ``step / rest`` bounds the
+real-time factor any speed-up of our Python could reach. A closer estimate adds, for
+each call Drake makes into our code a step (a timed call entered with none running),
+the body of the cheapest useful update: a ring of trivial Python systems, each reading
+one input port and writing its state (:func:`trivial_call_cost`; its Drake side is
+already in the rest): ``floor_ms_per_step``. An estimate, not a bound: some calls
+(an output that copies a state) can be cheaper than that body. Runs of the same code
+differ by more than the timers cost: compare the two rates on the first line.
 
 JSON ``{plain, instrumented, systems: [{name, ms_per_step, calls_per_s, share}], rest,
-bound_rtf, trivial_system, calls_per_step, floor_ms_per_step, floor_rtf, speed_index_s,
-...}``.
+wrapper_overhead_s, bound_rtf, trivial_system, calls_per_step, floor_ms_per_step,
+floor_rtf, speed_index_s, ...}``.
 """
 
 from __future__ import annotations
@@ -58,8 +58,9 @@ except ImportError:  # run as a script: benchmarks/ itself is on sys.path
 
 
 class Ledger:
-    """Exclusive wall time and calls per label, for nested timed calls (one thread: the
-    simulator's; calls from other threads are not timed)."""
+    """Exclusive time (``clock``: wall seconds by default, as the simulator's own
+    timing) and calls per label, for nested timed calls on the thread that made the
+    ledger (calls from other threads run untimed)."""
 
     def __init__(self, *, clock=time.perf_counter):
         import threading
@@ -67,6 +68,7 @@ class Ledger:
         self.seconds = collections.defaultdict(float)
         self.calls = collections.Counter()
         self.drake_calls = 0  # calls entered with no timed method running: from Drake
+        self.active = True
         self._stack: list[float] = []
         self._thread = threading.get_ident()
         self._get_ident = threading.get_ident
@@ -77,14 +79,16 @@ class Ledger:
         self.calls.clear()
         self.drake_calls = 0
 
-    def wrap(self, fn, label: str):
-        """``fn`` with its calls' exclusive time charged to ``label``."""
+    def wrap(self, fn, *, label):
+        """``fn`` with its calls' exclusive time charged to ``label``: a text, or a
+        function of the call's positional arguments that returns one."""
         clock, stack, seconds, calls = self._clock, self._stack, self.seconds, self.calls
         me, ident = self._thread, self._get_ident
         ledger = self
+        fixed = label if isinstance(label, str) else None
 
         def timed(*args, **kwargs):
-            if ident() != me:
+            if not ledger.active or ident() != me:
                 return fn(*args, **kwargs)
             if not stack:
                 ledger.drake_calls += 1
@@ -95,13 +99,26 @@ class Ledger:
             finally:
                 dt = clock() - t0
                 inner = stack.pop()
-                seconds[label] += dt - inner
-                calls[label] += 1
+                key = fixed or label(args)
+                seconds[key] += dt - inner
+                calls[key] += 1
                 if stack:
                     stack[-1] += dt
 
         timed.__wrapped__ = fn
         return timed
+
+
+def wrapper_overhead_s(*, calls: int = 100_000) -> float:
+    """Seconds a top-level timed call costs outside the time it charges (the part of a
+    call from Drake that lands in "the rest"), per call."""
+    ledger = Ledger()
+    noop = ledger.wrap(lambda: None, label="noop")
+    t0 = time.perf_counter()
+    for _ in range(calls):
+        noop()
+    total = time.perf_counter() - t0
+    return max(total - ledger.seconds["noop"], 0.0) / calls
 
 
 def leaf_system_classes():
@@ -119,36 +136,74 @@ def leaf_system_classes():
     return out
 
 
-def instrument(ledger: Ledger, classes, *, by_method: bool = False) -> list:
-    """Wraps the plain functions defined on each class (not dunders, not properties),
-    charged to the class (``Class.method`` with ``by_method``); returns ``(cls, name,
-    original)`` to :func:`restore`."""
+_ABSENT = object()
+#: LeafSystem methods whose ``calc`` (third positional argument, or keyword) is wrapped
+#: when it is not a timed method already: the lambdas systems declare outputs with
+_OUTPUT_DECLARATIONS = ("DeclareVectorOutputPort", "DeclareAbstractOutputPort")
+
+
+def instrument(*, ledger: Ledger, classes, by_method: bool = False) -> list:
+    """Wraps the plain functions defined on each class (not dunders, not properties) and
+    the output-port calculators its instances declare with lambdas; each call is charged
+    to the class of the instance (``Class.method``, ``Class.<port name>`` with
+    ``by_method``). Returns what :func:`restore` puts back."""
+    from pydrake.systems.framework import LeafSystem
+
     undo = []
     for cls in classes:
         for name, attr in list(vars(cls).items()):
             if name.startswith("__") or not inspect.isfunction(attr):
                 continue
-            label = f"{cls.__name__}.{name}" if by_method else cls.__name__
-            setattr(cls, name, ledger.wrap(attr, label))
+            if by_method:
+                label = lambda args, n=name: f"{type(args[0]).__name__}.{n}"  # noqa: E731
+            else:
+                label = lambda args: type(args[0]).__name__  # noqa: E731
             undo.append((cls, name, attr))
+            setattr(cls, name, ledger.wrap(attr, label=label))
+        for name in _OUTPUT_DECLARATIONS:
+            undo.append((cls, name, vars(cls).get(name, _ABSENT)))
+            setattr(cls, name, _declaring(getattr(LeafSystem, name), ledger, by_method))
     return undo
 
 
-def restore(undo) -> None:
-    for cls, name, attr in undo:
-        setattr(cls, name, attr)
+def _is_timed(fn) -> bool:
+    """Whether ``fn`` (or the function of a bound method) is a :meth:`Ledger.wrap` timer."""
+    return getattr(getattr(fn, "__func__", fn), "__qualname__", "").endswith("wrap.<locals>.timed")
+
+
+def _declaring(declare, ledger: Ledger, by_method: bool):
+    def wrapped(self, *args, **kwargs):
+        owner = type(self).__name__
+        label = f"{owner}.<{args[0] if args else kwargs.get('name')}>" if by_method else owner
+        if "calc" in kwargs and not _is_timed(kwargs["calc"]):
+            kwargs["calc"] = ledger.wrap(kwargs["calc"], label=label)
+        elif len(args) > 2 and not _is_timed(args[2]):
+            args = (*args[:2], ledger.wrap(args[2], label=label), *args[3:])
+        return declare(self, *args, **kwargs)
+
+    return wrapped
+
+
+def restore(*, undo) -> None:
+    """Puts back what :func:`instrument` replaced (last first)."""
+    for cls, name, attr in reversed(undo):
+        if attr is _ABSENT:
+            delattr(cls, name)
+        else:
+            setattr(cls, name, attr)
 
 
 def trivial_call_cost(*, systems: int = 10, sim_s: float = 20.0, step_s: float = 0.01) -> dict:
-    """The cheapest a useful Python system's update is here: a ring of ``systems``
-    LeafSystems, each with a periodic discrete update (``step_s``) that reads its
-    10-vector input port and writes its state (the next one's input), simulated
-    ``sim_s``. ``body_s`` is the update's own time (timed inside it, like a method in
-    the table), ``dispatch_s`` the rest of the CPU time, per call."""
+    """What a useful Python system's update costs at the least, here: a ring of
+    ``systems`` LeafSystems, each with a periodic discrete update (``step_s``) that reads
+    its 10-vector input port and writes its state (the next one's input), simulated
+    ``sim_s``. Per call (counted in the update): ``body_s``, the update's own time (timed
+    inside it, as a method in the table is), and ``dispatch_s``, the rest of the run's
+    time."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-    body = [0.0]
+    body = [0.0, 0]
     clock = time.perf_counter
 
     class Trivial(LeafSystem):
@@ -163,6 +218,7 @@ def trivial_call_cost(*, systems: int = 10, sim_s: float = 20.0, step_s: float =
             t0 = clock()
             discrete_state.set_value(0, self.u.Eval(context) * 0.5 + 1.0)
             body[0] += clock() - t0
+            body[1] += 1
 
     builder = DiagramBuilder()
     ring = [builder.AddSystem(Trivial()) for _ in range(systems)]
@@ -170,10 +226,11 @@ def trivial_call_cost(*, systems: int = 10, sim_s: float = 20.0, step_s: float =
         builder.Connect(a.get_output_port(), b.get_input_port())
     sim = Simulator(builder.Build())
     sim.Initialize()
-    c0 = time.process_time()
+    body[:] = [0.0, 0]
+    c0 = clock()
     sim.AdvanceTo(sim_s)
-    cpu = time.process_time() - c0
-    calls = systems * round(sim_s / step_s)
+    cpu = clock() - c0
+    calls = body[1]
     return {"systems": systems, "sim_s": sim_s, "cpu_s": cpu, "calls": calls,
             "body_s": body[0] / calls, "dispatch_s": (cpu - body[0]) / calls}  # fmt: skip
 
@@ -204,17 +261,25 @@ def main(argv=None) -> int:
     scenario = load_scenario(scenario_name=a.scenario, scenario_text=a.scenario_text)
     site = load_site(scenario, progress=False)
 
-    def run(diagram, t_s):
+    def run(diagram, t_s, ledger=None):
         sim = Simulator(diagram)
         ApplySimulatorConfig(scenario.simulator_config, sim)
         sim.Initialize()
-        c0, w0 = time.process_time(), time.perf_counter()
+        if ledger is not None:
+            ledger.clear()
+            ledger.active = True
+        c0, p0, w0 = time.thread_time(), time.process_time(), time.perf_counter()
         sim.AdvanceTo(t_s)
-        cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+        wall = time.perf_counter() - w0
+        cpu = time.thread_time() - c0
+        others = time.process_time() - p0 - cpu
+        if ledger is not None:
+            ledger.active = False  # the pose read below is not part of the run
         ctx = diagram.GetMyContextFromRoot(sim.get_context())
         xy = [float(v) for v in diagram.GetOutputPort("truth.pose").Eval(ctx)[:2]]
-        return {"cpu_s": cpu, "wall_s": wall, "rtf": t_s / wall, "steps":
-                sim.get_num_steps_taken(), "final_xy_m": xy}  # fmt: skip
+        steps = sim.get_num_steps_taken()
+        return {"cpu_s": cpu, "other_threads_cpu_s": max(others, 0.0), "wall_s": wall,
+                "rtf": t_s / wall, "steps": steps, "final_xy_m": xy}  # fmt: skip
 
     plain_diagram = MakeMissionDiagram(scenario=scenario, site=site)
     if a.warmup_s > 0:
@@ -223,15 +288,15 @@ def main(argv=None) -> int:
     del plain_diagram
 
     ledger = Ledger()
-    undo = instrument(ledger, leaf_system_classes(), by_method=a.by_method)
+    undo = []
     try:
+        undo = instrument(ledger=ledger, classes=leaf_system_classes(), by_method=a.by_method)
         diagram = MakeMissionDiagram(scenario=scenario, site=site)
         if a.warmup_s > 0:
-            run(diagram, a.warmup_s)
-        ledger.clear()
-        timed = run(diagram, a.sim_s)
+            run(diagram, a.warmup_s, ledger)
+        timed = run(diagram, a.sim_s, ledger)
     finally:
-        restore(undo)
+        restore(undo=undo)
     if timed["final_xy_m"] != plain["final_xy_m"]:
         raise SystemExit(
             f"the instrumented run ended at {timed['final_xy_m']}, the plain one at "
@@ -239,7 +304,7 @@ def main(argv=None) -> int:
         )
 
     per_step = a.step_ms * 1e-3 / a.sim_s  # seconds of the run -> ms per step: x 1e3 * this
-    total = timed["cpu_s"]
+    total = timed["wall_s"]  # the timers' clock: the table adds up to it
     systems = [
         {
             "name": name,
@@ -250,7 +315,8 @@ def main(argv=None) -> int:
         for name, s in sorted(ledger.seconds.items(), key=lambda kv: -kv[1])
     ]
     ours = sum(ledger.seconds.values())
-    rest = max(total - ours, 0.0)
+    overhead = wrapper_overhead_s()
+    rest = max(total - ours - overhead * ledger.drake_calls, 0.0)
     rest_ms = rest * 1e3 * per_step
     bound = a.step_ms / rest_ms if rest_ms > 0 else None
     trivial = trivial_call_cost()
@@ -268,6 +334,7 @@ def main(argv=None) -> int:
         "systems": systems,
         "python_ms_per_step": ours * 1e3 * per_step,
         "rest": {"ms_per_step": rest_ms, "share": rest / total},
+        "wrapper_overhead_s": overhead,
         "bound_rtf": bound,
         "trivial_system": trivial,
         "calls_per_step": calls_per_step,
@@ -277,10 +344,11 @@ def main(argv=None) -> int:
         "speed_index_s": speed["speed_index_s"],
         "speed_index": speed,
     }
-    step_cpu = plain["cpu_s"] * 1e3 * per_step
-    print(f"plain: {a.sim_s:g} s simulated in {plain['wall_s']:.2f} s (cpu {plain['cpu_s']:.2f} "
-          f"s), {plain['rtf']:.2f}x, {step_cpu:.3f} ms cpu per {a.step_ms:g} ms step; "
-          f"instrumented: {timed['rtf']:.2f}x")  # fmt: skip
+    step_ms = plain["wall_s"] * 1e3 * per_step
+    print(f"plain: {a.sim_s:g} s simulated in {plain['wall_s']:.2f} s ({plain['rtf']:.2f}x, "
+          f"{step_ms:.3f} ms a {a.step_ms:g} ms step; CPU {plain['cpu_s']:.2f} s on the "
+          f"simulator's thread, {plain['other_threads_cpu_s']:.2f} s on others); instrumented: "
+          f"{timed['rtf']:.2f}x")  # fmt: skip
     head = "system (class.method)" if a.by_method else "system (class)"
     print(f"{head:36} {'ms/step':>8} {'calls/s':>8} {'share':>6}")
     for s in systems[: a.top]:
@@ -295,8 +363,8 @@ def main(argv=None) -> int:
               f"{bound:.1f}x real time")  # fmt: skip
     print(f"a trivial Python system's update: {trivial['body_s'] * 1e6:.1f} us in its body, "
           f"{trivial['dispatch_s'] * 1e6:.1f} us in Drake; with each of the {calls_per_step:.1f} "
-          f"calls Drake makes into our methods a step that cheap, a step would cost "
-          f"{floor_ms:.3f} ms: at most {a.step_ms / floor_ms:.1f}x")  # fmt: skip
+          f"calls Drake makes into our methods a step that cheap, a step would cost about "
+          f"{floor_ms:.3f} ms ({a.step_ms / floor_ms:.1f}x)")  # fmt: skip
     print(speed_index_line(speed))
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")
