@@ -131,3 +131,17 @@ def test_a_short_run_accounts_for_its_cpu_time(tmp_path, capsys):
     assert "the rest (Drake, plant, bindings)" in capsys.readouterr().out
     # the timers are gone afterwards
     assert not any(sb._is_timed(f) for c in sb.leaf_system_classes() for f in vars(c).values())
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [(["--scenario", "nope"], "scenario 'nope' not found"),
+     (["--out", "/nonexistent/dir/budget.json"], "does not exist")],
+)  # fmt: skip
+def test_bad_input_is_one_line_and_exit_2(args, says, tmp_path):
+    import subprocess
+
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "step_budget.py"), *args],
+                       capture_output=True, text=True, timeout=300, cwd=tmp_path)  # fmt: skip
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert says in r.stderr and len(r.stderr.strip().splitlines()) == 1
