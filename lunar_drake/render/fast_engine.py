@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 
+from lunar_drake.errors import ConfigError
 from lunar_drake.render.hapke_lut import (
     ReflectanceLUT,
     lut_axis_f32,
@@ -579,6 +580,26 @@ def _in_frustum(tri, camera: PinholeCamera, near_m: float, margin_px: float = 2.
     return ~out
 
 
+_STACK: tuple = ((), None)  # (the meshes, their stacked arrays): the last set seen
+
+
+def _stacked(meshes):
+    """All meshes' vertices (V, 3), each vertex's mesh (V,) and the faces (F, 3) indexing
+    the stacked vertices; remembered for the last list of meshes (by identity)."""
+    global _STACK
+    seen, arrays = _STACK
+    if len(seen) == len(meshes) and all(a is b for a, b in zip(seen, meshes, strict=True)):
+        return arrays
+    offs = np.cumsum([0] + [m.vertices.shape[0] for m in meshes])
+    arrays = (
+        np.concatenate([m.vertices for m in meshes]),
+        np.repeat(np.arange(len(meshes)), np.diff(offs)),
+        np.concatenate([m.faces.astype(np.int64) + o for m, o in zip(meshes, offs, strict=False)]),
+    )
+    _STACK = (tuple(meshes), arrays)
+    return arrays
+
+
 def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: float = 1e-3):
     """``(height, width)`` bool: pixels whose ray may hit one of the posed meshes.
 
@@ -595,14 +616,16 @@ def rover_pixel_mask(meshes, poses, camera: PinholeCamera, X_WC, *, near_m: floa
     K = np.array([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy]])
     shift = 4  # fixed-point bits for fillPoly
     polys = []
-    tris = []
-    for m, X_WG in zip(meshes, poses, strict=True):
-        Xg = np.asarray(X_WG, np.float64)
-        R_CG = R_CW @ Xg[:3, :3]
-        v_C = m.vertices @ R_CG.T + R_CW @ (Xg[:3, 3] - p_WC)
-        tris.append(v_C[m.faces])  # (F, 3, 3)
-    if tris:
-        tri = np.concatenate(tris)
+    if len(poses) != len(meshes):
+        raise ConfigError(f"{len(poses)} poses for {len(meshes)} meshes; one pose per mesh")
+    if meshes:
+        # every mesh's vertices into C in one product (the meshes stacked once, cached)
+        V, of_mesh, F = _stacked(meshes)
+        Xg = np.asarray([np.asarray(X, np.float64) for X in poses]).reshape(-1, 4, 4)
+        R_CG = np.einsum("ij,mjk->mik", R_CW, Xg[:, :3, :3])
+        p_C = (Xg[:, :3, 3] - p_WC) @ R_CW.T
+        v_C = np.einsum("vij,vj->vi", R_CG[of_mesh], V) + p_C[of_mesh]
+        tri = v_C[F]  # (F, 3, 3)
         tri = tri[_in_frustum(tri, camera, near_m)]
         front = tri[:, :, 2] >= near_m
         nfront = front.sum(axis=1)
