@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.math import SpatialVelocity
 
 from lunar_drake.dynamics import terramechanics as tm
@@ -67,7 +67,6 @@ def test_footprint_geometry_flat_slope_and_rock():
     assert _geom(flat, (4.99, 0.0, R)).off_terrain[0]
 
 
-
 def test_compiled_geometry_matches_the_lookup_path(monkeypatch):
     """The one-call geometry and belly lookups of in-memory rasters give the same bits as
     the general path (``Heightfield.heights_within``), off the raster and on nodata too."""
@@ -90,6 +89,64 @@ def test_compiled_geometry_matches_the_lookup_path(monkeypatch):
     for a, b in zip(fast_belly, slow_belly, strict=True):
         np.testing.assert_array_equal(a, b)
     assert 0 < fast.off_terrain.sum() < 300 and (fast_belly[0] > 0).any()
+
+
+def test_one_call_contact_step_matches_the_step_by_step_path(monkeypatch):
+    """The system's fused stage 1 (``contact_kernels.step_kinematics``, in-memory rasters)
+    gives the same bits as the function-by-function path it takes for file-backed
+    rasters: wheels on, partly and wholly off the raster, belly points above and below
+    the ground, off the raster, and next to nodata (the same error both ways)."""
+    rng = np.random.default_rng(11)
+    z = rng.normal(0.0, 0.04, (120, 120)).astype(np.float32)
+    z[50:54, 60:70] = np.nan
+    hf = Heightfield.from_array(z, resolution_m=0.05)
+    belly_pts = np.array([[0.3, 0.2, -0.1], [-0.3, 0.2, -0.1], [0.0, -0.25, -0.12]])
+    contact = WheelRegolithContact(
+        wheel_bodies=[1, 2, 3], wheel=WHEEL, soil=SOIL, belly_body=0, belly_points_B=belly_pts
+    )
+
+    def outputs(poses, vels, j):
+        ctx = contact.CreateDefaultContext()
+        contact.set_patch_displacement(ctx, j)
+        contact.body_poses_input.FixValue(ctx, poses)
+        contact.body_spatial_velocities_input.FixValue(ctx, vels)
+        contact.heightfield_input.FixValue(ctx, hf)
+        try:
+            forces = contact.spatial_forces_output.Eval(ctx)
+        except NoDataError as e:
+            return str(e)
+        return (
+            np.array([np.r_[f.F_Bq_W.rotational(), f.F_Bq_W.translational()] for f in forces]),
+            contact.wheel_state_output.Eval(ctx).copy(),
+            contact.off_terrain_output.Eval(ctx).copy(),
+        )
+
+    cases = []
+    for k in range(60):
+        centre = rng.uniform(-2.4, 2.4, 2) if k % 8 else np.array([2.9, 0.0])  # some off
+        rpy = RollPitchYaw(rng.normal(0, 0.1), rng.normal(0, 0.1), rng.uniform(-3.1, 3.1))
+        chassis = RigidTransform(rpy, np.r_[centre, rng.uniform(0.0, 0.3)])
+        poses = [chassis] + [
+            chassis.multiply(RigidTransform(np.r_[rng.normal(0, 0.4, 2), -0.1])) for _ in range(3)
+        ]
+        vels = [SpatialVelocity(rng.normal(0, 0.3, 3), rng.normal(0, 0.3, 3)) for _ in range(4)]
+        cases.append((poses, vels, rng.normal(0.0, 1e-3, (3, 2))))
+    fast = [outputs(*c) for c in cases]
+    monkeypatch.setattr(Heightfield, "within_kernel_args", lambda self, **_: None)
+    slow = [outputs(*c) for c in cases]
+    for a, b in zip(fast, slow, strict=True):
+        assert type(a) is type(b)
+        if isinstance(a, str):
+            assert a == b
+            continue
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    done = [f for f in fast if not isinstance(f, str)]
+    # the cases reach every branch: a belly force, wheels in and out of contact, off
+    assert any(f[0].shape[0] == 4 for f in done)
+    sinkage = np.array([f[1][0 :: len(WHEEL_STATE_FIELDS)] for f in done])
+    assert (sinkage > 0).any() and (sinkage <= 0).any()
+    assert 0 < sum(f[2][0] for f in done) < len(done)
 
 
 def _contact_forces(hf, *, p, v, w_spin):

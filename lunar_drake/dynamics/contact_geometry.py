@@ -110,10 +110,10 @@ def wheel_contact_geometry(
     """
     p = np.ascontiguousarray(p_WWo, dtype=np.float64).reshape(-1, 3)
     a = np.ascontiguousarray(axle_W, dtype=np.float64).reshape(-1, 3)
-    U, Wc, pinv = _pattern(sampling, radius_m, width_m)
+    U, Wc, pinv = footprint_pattern(sampling, radius_m, width_m)
     raster = heightfield.within_kernel_args(margin_m=heightfield.resolution_m)
     if raster is not None:  # one compiled call: the same operations as below
-        sinkage, n_W, forward, lateral, p_WC, off = _geometry_in_memory(
+        sinkage, n_W, forward, lateral, p_WC, off = geometry_in_memory(
             *raster, p, a, U, Wc, pinv, float(radius_m)
         )
     else:
@@ -203,8 +203,9 @@ def _footprint_plane(p, a, f_h, s_h, U, zt, ok, pinv, radius):  # pragma: no cov
 
 
 @numba.njit(cache=True)
-def _geometry_in_memory(z, res, left, right, bottom, top, p, a, U, Wc, pinv,
-                        radius):  # pragma: no cover - numba
+def geometry_in_memory(
+    z, res, left, right, bottom, top, p, a, U, Wc, pinv, radius
+):  # pragma: no cover - numba
     """:func:`_footprint_points`, the heights of an in-memory raster
     (:func:`~lunar_drake.terrain.heightfield.heights_in_box`, the box already shrunk by
     the margin) and :func:`_footprint_plane` in one call."""
@@ -217,7 +218,7 @@ def _geometry_in_memory(z, res, left, right, bottom, top, p, a, U, Wc, pinv,
 _PATTERNS: dict = {}
 
 
-def _pattern(sampling: FootprintSampling, radius_m: float, width_m: float):
+def footprint_pattern(sampling: FootprintSampling, radius_m: float, width_m: float):
     """Sample offsets along (u) and across (w) the tread and the plane-fit pseudo-inverse."""
     key = (sampling, float(radius_m), float(width_m))
     if key not in _PATTERNS:

@@ -15,7 +15,9 @@ import numba
 import numpy as np
 
 from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.dynamics.contact_geometry import geometry_in_memory
 from lunar_drake.moon import GRAVITY_MPS2
+from lunar_drake.terrain.heightfield import heights_in_box
 
 
 def soil_constants(
@@ -117,6 +119,70 @@ def kinematics(v, wv, axle, sinkage, n_W, forward, lateral, on, par, const):  # 
         state[i, 3] = beta[i]
         state[i, 5] = 0.0 if on[i] else 1.0
     return state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil
+
+
+#: Per-wheel blocks of :func:`step_kinematics`' packed output, in order, with their
+#: columns: (name, columns); each block is ``n * columns`` values, row-major (n, columns).
+STAGE1_BLOCKS = (
+    ("p", 3), ("axle", 3), ("n_W", 3), ("forward_W", 3), ("lateral_W", 3), ("r_c", 3),
+    ("state", 6), ("N", 1), ("slip_velocity", 2), ("rolling_speed", 1),
+    ("patch_length", 1), ("static_weight", 1), ("fx", 1), ("fy", 1), ("m_soil", 1),
+)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radius, par,
+                    const, p_belly):  # pragma: no cover - numba  # fmt: skip
+    """Stage 1 in one call, from the bodies' poses ``X`` (m, 3, 4) and spatial velocities
+    ``V`` (m, 6) = [w, v] (the first ``n`` are the wheels), an in-memory raster
+    (:func:`~lunar_drake.terrain.heightfield.heights_in_box`' arguments, the box already
+    shrunk by the margin), the footprint pattern ``U, Wc, pinv`` and the belly points
+    ``p_belly`` (k, 3) in W: the same calls, in the same order, as
+    :func:`~lunar_drake.dynamics.contact_geometry.wheel_contact_geometry`,
+    :func:`kinematics` and the belly points' heights (the same bits).
+
+    Returns:
+        (values, flags): ``values`` the :data:`STAGE1_BLOCKS` one after the other
+        (``33 n`` values), then the belly points' penetration (k,) (m; -inf off the
+        raster); ``flags`` (n + k,) bool: each wheel's footprint on the raster, then
+        each belly point's.
+    """
+    p = np.ascontiguousarray(X[:n, :, 3])
+    axle = np.ascontiguousarray(X[:n, :, 1])
+    v = np.ascontiguousarray(V[:n, 3:])
+    wv = np.ascontiguousarray(V[:n, :3])
+    sinkage, n_W, forward, lateral, p_WC, off = geometry_in_memory(
+        z, res, left, right, bottom, top, p, axle, U, Wc, pinv, radius
+    )
+    on = ~off
+    state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil = kinematics(
+        v, wv, axle, sinkage, n_W, forward, lateral, on, par, const
+    )
+    k = p_belly.shape[0]
+    zt, ok = heights_in_box(
+        z, np.ascontiguousarray(p_belly[:, 0]), np.ascontiguousarray(p_belly[:, 1]), res,
+        left, right, bottom, top,
+    )  # fmt: skip
+    out = np.empty(33 * n + k)
+    flags = np.empty(n + k, np.bool_)
+    o = 0
+    for a in (p, axle, n_W, forward, lateral, p_WC - p):
+        out[o : o + 3 * n] = a.ravel()
+        o += 3 * n
+    out[o : o + 6 * n] = state.ravel()
+    o += 6 * n
+    out[o : o + n] = N
+    o += n
+    out[o : o + 2 * n] = slip_velocity.ravel()
+    o += 2 * n
+    for a in (omega_r, length, ws, fx, fy, m_soil):
+        out[o : o + n] = a
+        o += n
+    for i in range(k):
+        out[o + i] = zt[i] - p_belly[i, 2] if ok[i] else -np.inf
+    flags[:n] = on
+    flags[n:] = ok
+    return out, flags
 
 
 @numba.njit(cache=True)

@@ -24,6 +24,7 @@ from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.dynamics.contact_geometry import (
     FootprintSampling,
     belly_penetration,
+    footprint_pattern,
     wheel_contact_geometry,
 )
 from lunar_drake.terrain.heightfield import Heightfield
@@ -186,6 +187,7 @@ class WheelRegolithContact(LeafSystem):
             self._force_buffer.append(e)
         n = len(self._wheels)
         self._n = n
+        self._bodies = self._wheels + ([] if self._belly is None else [self._belly])
         self._memo = None  # (soil, kernel parameters) of the last soil seen
         self._soil_index = self.DeclareAbstractParameter(AbstractValue.Make(soil))
         self._patch_index = self.DeclareDiscreteState(2 * n)
@@ -279,14 +281,56 @@ class WheelRegolithContact(LeafSystem):
         poses = self.body_poses_input.Eval(context)
         vels = self.body_spatial_velocities_input.Eval(context)
         hf = self.heightfield_input.Eval(context)
-        soil = self.get_soil(context)
+        par, const = self._constants(self.get_soil(context))
+        n = self._n
+        # the wheels' and the chassis' poses and velocities, one array each
+        X = np.array([poses[i].GetAsMatrix34() for i in self._bodies])  # (n [+1], 3, 4)
+        V = np.array([vels[i].get_coeffs() for i in self._bodies])  # (n [+1], 6): [w, v]
+        has_belly = self._belly is not None and len(self._belly_pts) > 0
+        if has_belly:
+            Rb = np.ascontiguousarray(X[n, :, :3])
+            p_Bo = X[n, :, 3]
+            p_pts = p_Bo + self._belly_pts @ Rb.T
+        else:
+            p_pts = np.zeros((0, 3))
+        raster = hf.within_kernel_args(margin_m=hf.resolution_m)
+        if raster is None:  # a file-backed raster: the functions one by one
+            return self._kinematics_file_backed(hf, X, V, par, const, p_pts, has_belly)
         w = self._wheel
-        X = np.array([poses[i].GetAsMatrix34() for i in self._wheels])  # (n, 3, 4)
-        p = np.ascontiguousarray(X[:, :, 3])
-        axle = np.ascontiguousarray(X[:, :, 1])  # the wheel body's +y
-        V = np.array([vels[i].get_coeffs() for i in self._wheels])  # (n, 6): [w, v]
-        v = np.ascontiguousarray(V[:, 3:])
-        wv = np.ascontiguousarray(V[:, :3])
+        U, Wc, pinv = footprint_pattern(self._sampling, w.radius_m, w.width_m)
+        values, flags = ck.step_kinematics(
+            X, V, n, *raster, U, Wc, pinv, float(w.radius_m), par, const, p_pts
+        )
+        b = {}
+        o = 0
+        for name, cols in ck.STAGE1_BLOCKS:
+            size = n * cols
+            b[name] = values[o : o + size].reshape(n, cols) if cols > 1 else values[o : o + n]
+            o += size
+        on = flags[:n]
+        belly = None
+        off = not on.all()
+        if has_belly:
+            pen = values[o:]
+            ok = flags[n:]
+            off = off or not ok.all()
+            belly = self._belly_contact(hf, X, V, p_pts, pen, ok)
+        return _Kinematics(
+            p=b["p"], axle=b["axle"], n_W=b["n_W"], forward_W=b["forward_W"],
+            lateral_W=b["lateral_W"], r_c=b["r_c"], on=on, state=b["state"], N=b["N"],
+            slip_velocity=b["slip_velocity"], rolling_speed=b["rolling_speed"],
+            patch_length=b["patch_length"], static_weight=b["static_weight"],
+            dynamic=(b["fx"], b["fy"], b["m_soil"]), belly=belly, off=off,
+        )  # fmt: skip
+
+    def _kinematics_file_backed(self, hf, X, V, par, const, p_pts, has_belly) -> _Kinematics:
+        """Stage 1 on a file-backed raster (no compiled height lookups)."""
+        n = self._n
+        w = self._wheel
+        p = np.ascontiguousarray(X[:n, :, 3])
+        axle = np.ascontiguousarray(X[:n, :, 1])  # the wheel body's +y
+        v = np.ascontiguousarray(V[:n, 3:])
+        wv = np.ascontiguousarray(V[:n, :3])
         g = wheel_contact_geometry(
             heightfield=hf,
             p_WWo=p,
@@ -296,33 +340,15 @@ class WheelRegolithContact(LeafSystem):
             sampling=self._sampling,
         )
         on = ~g.off_terrain
-        # Slip, the Wong-Reece forces, the damped normal force, the static weight and the
-        # patch length in one compiled call (terramechanics' formulas).
-        par, const = self._constants(soil)
         state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil = ck.kinematics(
             v, wv, axle, g.sinkage, g.n_W, g.forward_W, g.lateral_W, on, par, const
         )
         belly = None
         off = bool((~on).any())
-        if self._belly is not None and len(self._belly_pts):
-            X = poses[self._belly]
-            V = vels[self._belly]
-            Rb = X.rotation().matrix()
-            p_pts = X.translation() + self._belly_pts @ Rb.T
-            pen, n_t, off_b = belly_penetration(heightfield=hf, p_WP=p_pts)
+        if has_belly:
+            pen, _, off_b = belly_penetration(heightfield=hf, p_WP=p_pts)
             off = off or bool(off_b.any())
-            touching = pen > 0
-            if touching.any():
-                r_b = p_pts - X.translation()
-                v_pts = V.translational() + np.cross(V.rotational(), r_b)
-                vn = np.einsum("ij,ij->i", v_pts, n_t)
-                fn = np.maximum(self._k_belly * np.clip(pen, 0, None) - self._c_belly * vn, 0)
-                fn = fn * touching
-                vt = v_pts - vn[:, None] * n_t
-                vt_norm = np.linalg.norm(vt, axis=1)
-                ft = -self._mu_belly * fn[:, None] * vt / np.maximum(vt_norm, 0.01)[:, None]
-                Fb = fn[:, None] * n_t + ft
-                belly = (Fb.sum(axis=0), np.cross(r_b, Fb).sum(axis=0))
+            belly = self._belly_contact(hf, X, V, p_pts, pen, ~off_b)
         return _Kinematics(
             p=p,
             axle=axle,
@@ -341,6 +367,30 @@ class WheelRegolithContact(LeafSystem):
             belly=belly,
             off=off,
         )
+
+    def _belly_contact(self, hf, X, V, p_pts, pen, ok):
+        """(force, moment about the chassis origin) in W of the penalty contact at the
+        belly points below the terrain (penetration ``pen`` (k,) m, ``ok`` on the
+        raster), or None when none touches."""
+        touching = pen > 0
+        if not touching.any():
+            return None
+        n = self._n
+        n_t = np.zeros((len(p_pts), 3))
+        n_t[:, 2] = 1.0
+        hit = ok & touching
+        n_t[hit] = hf.normal(p_pts[hit, 0], p_pts[hit, 1])
+        p_Bo = X[n, :, 3]
+        r_b = p_pts - p_Bo
+        v_pts = V[n, 3:] + np.cross(V[n, :3], r_b)
+        vn = np.einsum("ij,ij->i", v_pts, n_t)
+        fn = np.maximum(self._k_belly * np.clip(pen, 0, None) - self._c_belly * vn, 0)
+        fn = fn * touching
+        vt = v_pts - vn[:, None] * n_t
+        vt_norm = np.linalg.norm(vt, axis=1)
+        ft = -self._mu_belly * fn[:, None] * vt / np.maximum(vt_norm, 0.01)[:, None]
+        Fb = fn[:, None] * n_t + ft
+        return (Fb.sum(axis=0), np.cross(r_b, Fb).sum(axis=0))
 
     def _constants(self, soil: tm.SoilParams):
         """The compiled kernels' parameters of ``soil`` (remembered for the last soil

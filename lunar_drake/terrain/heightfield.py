@@ -605,9 +605,14 @@ class Heightfield:
         file-backed raster. The same lookups as :meth:`heights_within`."""
         if not isinstance(self._src, _ArraySource):
             return None
-        b = self.bounds
-        return (self._src.z, self.resolution_m, b.left + margin_m, b.right - margin_m,
-                b.bottom + margin_m, b.top - margin_m)  # fmt: skip
+        memo = self.__dict__.setdefault("_kernel_args", {})  # per margin: the contact's
+        args = memo.get(margin_m)  # hot loop asks every step
+        if args is None:
+            b = self.bounds
+            args = memo[margin_m] = (self._src.z, self.resolution_m, b.left + margin_m,
+                                     b.right - margin_m, b.bottom + margin_m,
+                                     b.top - margin_m)  # fmt: skip
+        return args
 
     def heights_within(self, x, y, *, margin_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Heights (m) and an ``ok`` mask at site points (m) for the contact's hot loop:
