@@ -43,12 +43,6 @@ Hapke and N VTK frames instead, so that slow drifts of the load from other tenan
 shared machine fall on both alike; measured here, a Hapke frame that follows VTK
 frames runs slower (its data has left the caches), so interleaving lowers the ratio.
 
-Creating the Hapke renderer tunes glibc's allocator for the whole process
-(``raycast.tune_malloc_for_large_arrays``: freed frame buffers are recycled, not faulted
-in again), as it does in a mission; it happens before the VTK set-up, so both renderers'
-frames run with it (``malloc_tuned`` in the JSON; a ``MALLOC_MMAP_THRESHOLD_`` or
-``MALLOC_TRIM_THRESHOLD_`` in the environment keeps the environment's choice instead).
-
 With the size check (default) a 640 x 480 VTK camera is timed too, so the full-size time
 is seen to scale with the pixel count (it really renders), and an Eval without a pose
 change shows the cache hit.
@@ -365,6 +359,11 @@ def main(argv=None) -> int:
     )
     p.add_argument("--vtk-shadows", action="store_true", help="VTK shadow mapping on")
     p.add_argument("--no-size-check", action="store_true", help="skip the half-size VTK timing")
+    p.add_argument(
+        "--tune-malloc",
+        action="store_true",
+        help="call raycast.tune_malloc_for_large_arrays() first (process-wide glibc tuning)",
+    )
     p.add_argument("--images", default=None, help="write hapke.png / vtk.png previews here")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed")
     p.add_argument("--out", default=None, help="write results JSON here")
@@ -381,6 +380,12 @@ def main(argv=None) -> int:
     load_before = _loadavg()
     measure_speed_index, speed_index_line = _speed_index()
     speed = measure_speed_index()
+    malloc_tuned = False
+    if args.tune_malloc:
+        from lunar_drake.render.raycast import tune_malloc_for_large_arrays
+
+        malloc_tuned = tune_malloc_for_large_arrays()
+
     from lunar_drake import rng
     from lunar_drake.ephemeris.sun_earth import SiteLocation
     from lunar_drake.render import shading
@@ -473,11 +478,6 @@ def main(argv=None) -> int:
         earth_phase=earth_phase,
     )
     lmap = lm_sampler if sun_up else None
-    # the renderer tuned glibc's allocator for the process (raycast.
-    # tune_malloc_for_large_arrays): the VTK frames below run with it too
-    from lunar_drake.render.raycast import tune_malloc_for_large_arrays
-
-    malloc_tuned = tune_malloc_for_large_arrays()
     key = rng.stream_key(args.seed, "bench/render/camera")
     cpu_s = []  # process CPU seconds of every Hapke frame (the timed ones picked below)
 

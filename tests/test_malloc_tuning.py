@@ -1,4 +1,4 @@
-"""The renderer's process-wide allocator tuning (raycast.tune_malloc_for_large_arrays).
+"""The process-wide allocator tuning (raycast.tune_malloc_for_large_arrays).
 
 Each case runs in a fresh interpreter (the tuning is process-wide and happens once) and
 counts the page faults of a frame-like allocation pattern: six 5 MB buffers written and
@@ -18,13 +18,7 @@ PROBE = textwrap.dedent(
     import numpy as np
     from lunar_drake.render import raycast
 
-    if sys.argv[1] == "renderer":
-        from lunar_drake.render.camera import CameraConfig, TerrainCameraRenderer
-        from lunar_drake.terrain.heightfield import Heightfield
-
-        hf = Heightfield.from_array(np.zeros((32, 32), np.float32), resolution_m=0.1)
-        TerrainCameraRenderer(heightfield=hf, model=CameraConfig(width=64, height=48))
-    tuned = raycast.tune_malloc_for_large_arrays()
+    tuned = raycast.tune_malloc_for_large_arrays() if sys.argv[1] == "tune" else None
 
     def frame():
         bufs = [np.empty(5 * 2**20 // 4, np.float32) for _ in range(6)]
@@ -51,17 +45,15 @@ def _probe(mode: str, **env) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_a_renderer_tunes_the_process_and_freed_frames_are_recycled():
-    tuned = _probe("renderer")
+def test_the_tuning_recycles_freed_frames_and_respects_the_environment():
+    tuned = _probe("tune")
+    untuned = _probe("none")
     # glibc's own thresholds, made explicit: the environment's choice stands
-    plain = _probe("renderer", MALLOC_TRIM_THRESHOLD_="131072")
+    env = _probe("tune", MALLOC_TRIM_THRESHOLD_="131072")
     assert tuned["tuned"] is True and tuned["again"] is True
-    assert plain["tuned"] is False and plain["again"] is False
+    assert untuned["tuned"] is None and untuned["again"] is True  # asked at the end
+    assert env["tuned"] is False and env["again"] is False
+    assert _probe("tune", MALLOC_MMAP_THRESHOLD_="131072")["tuned"] is False
     # 150 MB written into recycled memory: pages fault in once, not every frame
-    assert plain["faults"] > 1000, plain
-    assert tuned["faults"] < plain["faults"] / 10, (tuned, plain)
-
-
-def test_the_tuning_alone_without_a_renderer():
-    assert _probe("alone")["tuned"] is True
-    assert _probe("alone", MALLOC_MMAP_THRESHOLD_="131072")["tuned"] is False
+    assert untuned["faults"] > 1000 and env["faults"] > 1000, (untuned, env)
+    assert tuned["faults"] < untuned["faults"] / 10, (tuned, untuned)

@@ -26,12 +26,7 @@ import numpy as np
 from lunar_drake.errors import ConfigError, LunarDrakeError, OutOfRangeError, check_range
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render import sensor as sensor_mod
-from lunar_drake.render.raycast import (
-    DynamicMesh,
-    PinholeCamera,
-    TerrainRaycaster,
-    tune_malloc_for_large_arrays,
-)
+from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
 from lunar_drake.render.regolith import RegolithTextureConfig
 from lunar_drake.render.shading import (
     Illumination,
@@ -188,10 +183,6 @@ class TerrainCameraRenderer:
         texture: the sub-cell regolith texture (:class:`~lunar_drake.render.regolith.
             RegolithTextureConfig`; None = the default, on with a fixed seed).
         soft_shadows: smooth (quadratic B-spline) lightmap reconstruction.
-
-    Creating one tunes glibc's allocator for the process
-    (:func:`~lunar_drake.render.raycast.tune_malloc_for_large_arrays`: freed frame
-    buffers are recycled instead of faulted in again; results never change).
     """
 
     def __init__(
@@ -207,7 +198,6 @@ class TerrainCameraRenderer:
     ):
         model = CameraConfig() if model is None else model
         model.validate()
-        tune_malloc_for_large_arrays()
         self.heightfield = heightfield
         self.model = model
         self.sensor = model.sensor

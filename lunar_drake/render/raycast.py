@@ -93,17 +93,17 @@ _MALLOC_TUNED: bool | None = None  # the process's answer, once asked
 def tune_malloc_for_large_arrays() -> bool:
     """Keep freed large blocks in glibc's heap (process-wide; Linux only; once).
 
-    A frame allocates tens of 1-30 MB arrays (profiles, hit distances, radiance, the
-    sensor's codes); with glibc's defaults such a block is a fresh ``mmap`` (or heap top
-    that was trimmed back), whose pages the kernel faults in and zeroes on first touch,
-    frame after frame. This raises ``M_MMAP_THRESHOLD`` to its 32 MiB maximum and
-    ``M_TRIM_THRESHOLD`` to 2 GiB so the memory is recycled instead. It never changes
-    results; the cost is that the process keeps its peak heap (it is not handed back to
-    the system when freed). :class:`~lunar_drake.render.camera.TerrainCameraRenderer`
-    calls it, so every process that renders is tuned (measured on the render benchmark:
-    8 % less CPU a frame, ``docs/lighting.md``). Equivalent to starting Python with
-    ``MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=2147483647``; where either
-    variable is already set, the environment's choice stands and nothing is changed.
+    Large arrays (1-30 MB: a camera frame's buffers, stereo images) are fresh ``mmap`` s
+    under glibc's defaults, or heap top that was trimmed back, whose pages the kernel
+    faults in and zeroes on first touch, again and again. This raises
+    ``M_MMAP_THRESHOLD`` to its 32 MiB maximum and ``M_TRIM_THRESHOLD`` to 2 GiB so freed
+    memory is recycled instead. It never changes results; the process keeps its peak heap
+    (it is not handed back to the system). A process-wide choice, left to applications
+    (``benchmarks/render.py --tune-malloc``): it speeds up every library in the process,
+    Drake's VTK renderer most (``docs/lighting.md``, 2026-11-28: VTK frames 8-23 % less
+    CPU in four of four pairs, Hapke frames within the noise). Equivalent to starting
+    Python with ``MALLOC_MMAP_THRESHOLD_=33554432 MALLOC_TRIM_THRESHOLD_=2147483647``;
+    where either variable is already set, the environment's choice stands.
 
     Returns:
         True when the process runs with the tuning (set here, now or earlier); False
