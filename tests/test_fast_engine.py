@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lunar_drake.errors import OutOfRangeError
+from lunar_drake.errors import ConfigError, OutOfRangeError
 from lunar_drake.render import hapke as hapke_mod
 from lunar_drake.render.camera import CameraConfig, TerrainCameraRenderer
 from lunar_drake.render.fast_engine import rover_pixel_mask
@@ -228,12 +228,18 @@ def test_rover_pixel_mask_covers_every_mesh_hit_even_across_the_near_plane():
     mask = rover_pixel_mask(boxes, [np.eye(4)] * 2, cam, X)
     assert hit.any() and not (hit & ~mask).any()
     assert mask.mean() < 0.8  # and it is not just the whole image
+    mask_boxes = mask
     # a box straddling the camera plane (the camera sits inside its bounding sphere)
     wide = [_box([0.0, 0.0, 0.8], [2.0, 2.0, 0.05])]
     rc.set_dynamic_meshes(wide, [np.eye(4)])
     hit = np.isfinite(rc.cast_rays(rays).t_hit).reshape(cam.height, cam.width)
     mask = rover_pixel_mask(wide, [np.eye(4)], cam, X)
     assert hit.any() and not (hit & ~mask).any()
+    # the first list of meshes again (the stacked meshes are remembered by identity)
+    assert np.array_equal(rover_pixel_mask(boxes, [np.eye(4)] * 2, cam, X), mask_boxes)
+    assert not rover_pixel_mask([], [], cam, X).any()
+    with pytest.raises(ConfigError, match="1 poses for 2 meshes"):
+        rover_pixel_mask(boxes, [np.eye(4)], cam, X)
 
 
 def _renderers(hf, meshes, w=128, h=96):

@@ -19,6 +19,7 @@ from lunar_drake.errors import (
     CRSError,
     NoDataError,
     OutOfBoundsError,
+    OutOfRangeError,
     RasterError,
     RasterNotFoundError,
 )
@@ -324,6 +325,14 @@ def test_heights_within_matches_height_and_flags_edges_and_nodata(tmp_path):
                 assert ok[i, j] and got[i, j] == want  # the same bits
             assert not ok[~inside].any() and np.all(got[~inside] == -np.inf)
             assert ok.sum() > 0.5 * ok.size
+        # a margin must be a finite distance >= 0, in memory and from a file alike
+        for hf in (mem, fil):
+            for bad in (np.nan, np.inf, -0.1):
+                with pytest.raises(OutOfRangeError, match="margin_m"):
+                    hf.heights_within(x, y, margin_m=bad)
+    # the kernel's arguments are remembered per margin (the contact asks every step)
+    assert mem.within_kernel_args(margin_m=0.1) is mem.within_kernel_args(margin_m=0.1)
+    assert mem.within_kernel_args(margin_m=0.1)[2] == mem.bounds.left + 0.1
 
 
 def test_bilinear_central_differences_and_edge_clamp():

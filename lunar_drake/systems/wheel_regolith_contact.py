@@ -346,9 +346,9 @@ class WheelRegolithContact(LeafSystem):
         belly = None
         off = bool((~on).any())
         if has_belly:
-            pen, _, off_b = belly_penetration(heightfield=hf, p_WP=p_pts)
+            pen, n_t, off_b = belly_penetration(heightfield=hf, p_WP=p_pts)
             off = off or bool(off_b.any())
-            belly = self._belly_contact(hf, X, V, p_pts, pen, ~off_b)
+            belly = self._belly_contact(hf, X, V, p_pts, pen, ~off_b, n_t=n_t)
         return _Kinematics(
             p=p,
             axle=axle,
@@ -368,18 +368,20 @@ class WheelRegolithContact(LeafSystem):
             off=off,
         )
 
-    def _belly_contact(self, hf, X, V, p_pts, pen, ok):
+    def _belly_contact(self, hf, X, V, p_pts, pen, ok, *, n_t=None):
         """(force, moment about the chassis origin) in W of the penalty contact at the
         belly points below the terrain (penetration ``pen`` (k,) m, ``ok`` on the
-        raster), or None when none touches."""
+        raster; terrain normals ``n_t`` (k, 3) where already known), or None when none
+        touches."""
         touching = pen > 0
         if not touching.any():
             return None
         n = self._n
-        n_t = np.zeros((len(p_pts), 3))
-        n_t[:, 2] = 1.0
-        hit = ok & touching
-        n_t[hit] = hf.normal(p_pts[hit, 0], p_pts[hit, 1])
+        if n_t is None:  # as belly_penetration: the terrain's normal where touching
+            n_t = np.zeros((len(p_pts), 3))
+            n_t[:, 2] = 1.0
+            hit = ok & touching
+            n_t[hit] = hf.normal(p_pts[hit, 0], p_pts[hit, 1])
         p_Bo = X[n, :, 3]
         r_b = p_pts - p_Bo
         v_pts = V[n, 3:] + np.cross(V[n, :3], r_b)

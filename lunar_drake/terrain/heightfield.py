@@ -602,16 +602,27 @@ class Heightfield:
     def within_kernel_args(self, *, margin_m: float = 0.0):
         """``(z, resolution_m, left, right, bottom, top)`` for compiled callers of
         :func:`heights_in_box` (the box shrunk by ``margin_m``, m), or None for a
-        file-backed raster. The same lookups as :meth:`heights_within`."""
-        if not isinstance(self._src, _ArraySource):
-            return None
+        file-backed raster. The same lookups as :meth:`heights_within`.
+
+        Raises:
+            OutOfRangeError: ``margin_m`` is negative or not a finite number.
+        """
         memo = self.__dict__.setdefault("_kernel_args", {})  # per margin: the contact's
         args = memo.get(margin_m)  # hot loop asks every step
-        if args is None:
-            b = self.bounds
-            args = memo[margin_m] = (self._src.z, self.resolution_m, b.left + margin_m,
-                                     b.right - margin_m, b.bottom + margin_m,
-                                     b.top - margin_m)  # fmt: skip
+        if args is not None:
+            return args
+        try:
+            ok = math.isfinite(float(margin_m)) and float(margin_m) >= 0.0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise OutOfRangeError(f"margin_m = {margin_m!r}; a finite distance >= 0 m is required")
+        if not isinstance(self._src, _ArraySource):
+            return None
+        b = self.bounds
+        args = memo[margin_m] = (self._src.z, self.resolution_m, b.left + margin_m,
+                                 b.right - margin_m, b.bottom + margin_m,
+                                 b.top - margin_m)  # fmt: skip
         return args
 
     def heights_within(self, x, y, *, margin_m: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
