@@ -21,7 +21,7 @@ from lunar_drake.sensors import imu as imu_core
 from lunar_drake.sensors import star_tracker as st_core
 from lunar_drake.sensors import wheel_encoders as enc_core
 from lunar_drake.sensors.sampling import delivered_index, sample_index, samples_in_flight
-from lunar_drake.systems.imu import Imu
+from lunar_drake.systems.imu import add_imu
 from lunar_drake.systems.star_tracker import StarTracker
 from lunar_drake.systems.wheel_encoders import WheelEncoders, wheel_angle_selector
 
@@ -223,16 +223,7 @@ def _build(*, weld_pose=None, gravity=(0.0, 0.0, 0.0), imus=(), star_tracker=Non
     plant.Finalize()
     systems = []
     for kw in imus:
-        imu = builder.AddSystem(Imu(body_index=body.index(), gravity_W=gravity, **kw))
-        builder.Connect(plant.get_body_poses_output_port(), imu.body_poses_input)
-        builder.Connect(
-            plant.get_body_spatial_velocities_output_port(), imu.body_spatial_velocities_input
-        )
-        builder.Connect(
-            plant.get_body_spatial_accelerations_output_port(),
-            imu.body_spatial_accelerations_input,
-        )
-        systems.append(imu)
+        systems.append(add_imu(builder, plant=plant, body=body, **kw))
     if star_tracker is not None:
         st = builder.AddSystem(StarTracker(body_index=body.index(), **star_tracker))
         builder.Connect(plant.get_body_poses_output_port(), st.body_poses_input)
@@ -311,6 +302,50 @@ def test_accelerometer_at_rest_reads_lunar_specific_force(rpy):
     assert np.all(np.abs(m[:, :3].mean(0)) < tol[:3])
     if rpy == (0.0, 0.0, 0.0):
         assert abs(m[:, 5].mean() - 1.62) < tol[5]
+
+
+def test_drakes_ideal_sensors_agree_with_the_ideal_reading_core():
+    """The wiring of add_imu (the sensor frame, the lever arm, gravity in free fall):
+    Drake's Gyroscope and Accelerometer on a tumbling body against ``imu_ideal`` (our
+    own formulation) fed with the plant's body kinematics. Gravity's sign at rest:
+    test_accelerometer_at_rest_reads_lunar_specific_force."""
+    X_BS = RigidTransform(RollPitchYaw(0.3, -0.2, 0.9), [0.2, -0.1, 0.05])
+    diagram, plant, body, (imu,) = _build(
+        gravity=GRAVITY_W, imus=[dict(seed=1, config=imu_core.ImuConfig(), X_BS=X_BS)]
+    )
+    builder_systems = {s.get_name(): s for s in diagram.GetSystems()}
+    gyro = next(s for n, s in builder_systems.items() if n.endswith(".gyroscope"))
+    accel = next(s for n, s in builder_systems.items() if n.endswith(".accelerometer"))
+    ctx = diagram.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    reads = []
+    for _ in range(5):
+        pc = plant.GetMyMutableContextFromRoot(ctx)
+        R = RollPitchYaw(*rng.uniform(-1, 1, 3)).ToRotationMatrix()
+        plant.SetFreeBodyPose(pc, body, RigidTransform(R, rng.uniform(-1, 1, 3)))
+        plant.SetFreeBodySpatialVelocity(
+            pc, body, SpatialVelocity(rng.uniform(-2, 2, 3), rng.uniform(-1, 1, 3))
+        )
+        X_WB = plant.get_body_poses_output_port().Eval(pc)[body.index()]
+        V_WB = plant.get_body_spatial_velocities_output_port().Eval(pc)[body.index()]
+        A_WB = plant.get_body_spatial_accelerations_output_port().Eval(pc)[body.index()]
+        ideal = imu_core.imu_ideal(
+            R_WB=X_WB.rotation().matrix(),
+            w_WB_W=V_WB.rotational(),
+            alpha_WB_W=A_WB.rotational(),
+            a_WBo_W=A_WB.translational(),
+            R_BS=X_BS.rotation().matrix(),
+            p_BS=X_BS.translation(),
+            gravity_W=GRAVITY_W,
+        )
+        w = gyro.get_measurement_output_port().Eval(gyro.GetMyContextFromRoot(ctx))
+        f = accel.get_measurement_output_port().Eval(accel.GetMyContextFromRoot(ctx))
+        np.testing.assert_allclose(w, ideal[:3], atol=1e-12)
+        np.testing.assert_allclose(f, ideal[3:], atol=1e-12)
+        # free fall: gravity cancels, the lever arm's centripetal term is what reads
+        reads.append(np.linalg.norm(ideal[3:]))
+    assert len(reads) == 5 and max(reads) > 0.3
+    assert imu.angular_velocity_input.size() == 3 and imu.specific_force_input.size() == 3
 
 
 def test_accelerometer_in_free_fall_reads_zero():

@@ -45,7 +45,7 @@ from lunar_drake.systems.body_pose_vector import BodyPoseVector
 from lunar_drake.systems.earth_line_of_sight import EarthLineOfSight
 from lunar_drake.systems.energy_meter import EnergyMeter
 from lunar_drake.systems.ephemeris_source import EphemerisSource
-from lunar_drake.systems.imu import Imu
+from lunar_drake.systems.imu import add_imu
 from lunar_drake.systems.meshcat_sun import MeshcatSun
 from lunar_drake.systems.power_system import PowerSystem
 from lunar_drake.systems.star_tracker import StarTracker
@@ -259,23 +259,8 @@ def _add_sensors(builder, *, scenario: Scenario, plant, rover: RoverModel) -> No
     seed = scenario.random_seed
     sc = scenario.sensors
     chassis = rover.chassis.index()
-    imu = builder.AddNamedSystem(
-        "rover.imu",
-        Imu(
-            body_index=chassis,
-            seed=seed,
-            name="rover.imu",
-            config=sc.imu,
-            gravity_W=plant.gravity_field().gravity_vector(),
-        ),
-    )
-    builder.Connect(plant.get_body_poses_output_port(), imu.body_poses_input)
-    builder.Connect(
-        plant.get_body_spatial_velocities_output_port(), imu.body_spatial_velocities_input
-    )
-    builder.Connect(
-        plant.get_body_spatial_accelerations_output_port(), imu.body_spatial_accelerations_input
-    )
+    imu = add_imu(builder, plant=plant, body=rover.chassis, seed=seed, name="rover.imu",
+                  config=sc.imu)  # fmt: skip
     builder.ExportOutput(imu.measurement_output, "rover.imu")
     builder.ExportOutput(imu.bias_truth_output, "truth.imu_bias")
     st = builder.AddNamedSystem(

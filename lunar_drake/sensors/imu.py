@@ -122,7 +122,9 @@ def imu_ideal(
 
     The accelerometer measures specific force ``f = a_WS - g`` of the sensor point
     ``So = Bo + R_WB p_BS`` (a_WS = a_WBo + alpha x r + w x (w x r)); at rest on level
-    ground it reads ``+|g|`` along up.
+    ground it reads ``+|g|`` along up. The mission's IMU takes this reading from Drake's
+    ``Gyroscope`` and ``Accelerometer`` (:func:`lunar_drake.systems.imu.add_imu`); a
+    test holds the two to 1e-12.
     """
     R_WB = np.asarray(R_WB, dtype=np.float64)
     R_BS = np.eye(3) if R_BS is None else np.asarray(R_BS, dtype=np.float64)
