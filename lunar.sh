@@ -80,8 +80,8 @@ a few minutes), then runs COMMAND:
   ./lunar.sh setup                  set-up only
   ./lunar.sh run [OPTIONS]          a mission (the default one if no --scenario; also
                                     what ./lunar.sh alone does): minutes on 2 cores and a
-                                    few hundred MB in runs/default; --scenario small is a
-                                    first look in seconds
+                                    few hundred MB in runs/default; --scenario goto is a
+                                    first look in about a minute
   ./lunar.sh run --serve            a live mission: prints the mission-control URL (Open
                                     MCT), paced to real time; drive the rover from the page
   ./lunar.sh serve RUN_DIR          a finished run in the mission-control page

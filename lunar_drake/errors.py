@@ -69,5 +69,16 @@ def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit=
         lb = "(" if lo_open else "["
         rb = ")" if hi_open else "]"
         raise OutOfRangeError(
-            f"{name} = {format_value(value)} is out of range; allowed {lb}{lo:g}, {hi:g}{rb}{unit}"
+            f"{name} = {format_value(value)} is out of range; allowed "
+            f"{lb}{_bound(lo)}, {_bound(hi)}{rb}{unit}"
         )
+
+
+def _bound(v) -> str:
+    """A range end as written: ``%g`` for floats; an integer exactly (``2**63 - 1``
+    rather than 9.22337e+18)."""
+    if isinstance(v, int) and not isinstance(v, bool):
+        if v > 2**20 and (v + 1) & v == 0:
+            return f"2**{(v + 1).bit_length() - 1} - 1"
+        return str(v)
+    return f"{v:g}"

@@ -88,7 +88,13 @@ def write_ground_map(path, *, logs, scenario, margin_m: float = 8.0) -> Path | N
                  layout="constrained")  # fmt: skip
     ax = fig.subplots()
     finite = np.where(np.isfinite(cost), cost, np.nan)
-    ax.imshow(finite, extent=extent, cmap="Greys", origin="upper", interpolation="nearest")
+    grey = ax.imshow(finite, extent=extent, cmap="Greys", origin="upper",
+                     interpolation="nearest")  # fmt: skip
+    # The grey scale is the planner's cost per metre of the free cells (1: level and
+    # smooth; slope, steps and roughness raise it); lethal cells are left white under
+    # their hazard colour.
+    fig.colorbar(grey, ax=ax, shrink=0.5, pad=0.01,
+                 label="planner cost per metre (free cells; 1 = level, smooth)")  # fmt: skip
     classes = hazard_classes(cm, getattr(logs, "ground_prior_costmap", None))
     classes = {k: v[r0:r1, c0:c1] for k, v in classes.items()}
     handles = []

@@ -17,6 +17,10 @@ from lunar_drake.simulation import SimulationLogs
 from lunar_drake.site import SiteData
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
 
+MIN_RATE_DISTANCE_M = 1.0
+"""Below this traverse (m) the per-metre figures (``error_per_distance``, ``Wh_per_m``)
+are None: divided by a few millimetres of creep they say nothing."""
+
 
 def _r(x, nd: int = 6):
     return round(float(x), nd)
@@ -106,9 +110,10 @@ def position_nees(logs: SimulationLogs) -> dict | None:
 
 def localization(logs: SimulationLogs) -> dict:
     """The on-board estimate against truth: at the end, the horizontal position error (m),
-    its ratio to the distance driven, the heading error (deg) and the estimate's own 1
-    sigma; over the run, the EKF's normalized estimation error squared (NEES, 6 dof:
-    position with z relative to the start, world-frame attitude error) -- its mean and
+    its ratio to the distance driven (None under :data:`MIN_RATE_DISTANCE_M`), the
+    heading error (deg) and the estimate's own 1 sigma; over the run, the EKF's
+    normalized estimation error squared (NEES, 6 dof: position with z relative to the
+    start, world-frame attitude error) -- its mean and
     the fraction of samples inside the 95 % chi-square interval (1.24, 14.45); and the
     horizontal position's own NEES (:func:`position_nees`, 2 dof)."""
     from lunar_drake.autonomy.ekf import so3_log
@@ -124,7 +129,7 @@ def localization(logs: SimulationLogs) -> dict:
     dist = traverse(logs)["distance_m"]
     out = {
         "final_position_error_m": _r(err),
-        "error_per_distance": _r(err / dist) if dist > 1e-6 else None,
+        "error_per_distance": _r(err / dist) if dist >= MIN_RATE_DISTANCE_M else None,
         "final_heading_error_deg": _r(yaw_err, 4),
     }
     cov = logs.vectors.get("flight.pose_covariance")
@@ -237,7 +242,7 @@ def power(logs: SimulationLogs) -> dict | None:
     ``energy_generated_Wh`` (the array), ``energy_used_Wh`` (the loads), ``min_soc`` and
     ``final_soc``, ``shadow_s`` (time with no direct sunlight on the panel: visible
     fraction 0 or incidence >= 90 deg) and ``Wh_per_m`` (energy used per metre driven,
-    None without a traverse). None when the run has no power system."""
+    None under :data:`MIN_RATE_DISTANCE_M` of traverse). None when the run has no power system."""
     log = logs.vectors.get("truth.power")
     if log is None or not len(log.times):
         return None
@@ -253,7 +258,7 @@ def power(logs: SimulationLogs) -> dict | None:
         "min_soc": _r(np.min(soc)),
         "final_soc": _r(soc[-1]),
         "shadow_s": _r(float(np.sum(dt[dark[:-1]])), 3),
-        "Wh_per_m": _r(used / dist) if dist > 1e-6 else None,
+        "Wh_per_m": _r(used / dist) if dist >= MIN_RATE_DISTANCE_M else None,
     }
 
 

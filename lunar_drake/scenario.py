@@ -430,6 +430,10 @@ class LoggingConfig:
     save_frames: bool = True
 
 
+
+MAX_DURATION_S = 1.0e7
+"""The longest ``simulation_duration`` a scenario may ask for (s)."""
+
 @dc.dataclass
 class Scenario:
     """Everything a run needs. Field names are the YAML keys.
@@ -499,7 +503,7 @@ def _is_power_of_two(n: int) -> bool:
 def validate_scenario(s: Scenario) -> None:
     """Range-checks a loaded scenario; raises OutOfRangeError/ConfigError naming the key."""
     check_range("random_seed", s.random_seed, 0, 2**63 - 1)
-    check_range("simulation_duration", s.simulation_duration, 0.0, 1.0e7, unit=" s")
+    check_range("simulation_duration", s.simulation_duration, 0.0, MAX_DURATION_S, unit=" s")
     if not math.isfinite(s.simulation_duration):
         raise OutOfRangeError(f"simulation_duration = {s.simulation_duration!r} must be finite")
     check_range("site.seed", s.site.seed, 0, 2**63 - 1)

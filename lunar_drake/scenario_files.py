@@ -144,7 +144,7 @@ def _check_keys(node, schema, path: str, source: str) -> None:
             return
         raise ConfigError(
             f"{_where(source, node)}: {path or 'the scenario'} must be a mapping of keys "
-            f"({', '.join(sorted(fields))}), not {node.value!r}"
+            f"({', '.join(sorted(fields))}), not {_node_text(node)}"
         )
     for key_node, value in node.value:
         key = key_node.value
@@ -217,6 +217,35 @@ def _resolve_paths(s: Scenario, base: Path) -> None:
         s.flight.estimator.slip_calibration = str((base / cal).resolve())
 
 
+INTERNAL_SCENARIOS = ("Defaults", "OneOfEverything")
+"""Test scenarios of the packaged file in Drake's style (``Defaults: {}``: every default;
+``OneOfEverything``: every field set), not missions: lists leave them out."""
+
+
+def _unknown_scenario(name: str, names: list[str], source: str) -> str:
+    """The one-line error for a scenario name not in ``names``: the nearest name when
+    one is close (case ignored), then the missions to choose from."""
+    import difflib
+
+    shown = [n for n in names if n not in INTERNAL_SCENARIOS] or names
+    lower = {n.lower(): n for n in names}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=0.6)
+    hint = f"did you mean {lower[close[0]]!r}? " if close else ""
+    return f"scenario {name!r} not found in {source!r}; {hint}choose one of {shown}"
+
+
+def _node_text(node) -> str:
+    """A YAML node's text as the user wrote it, on one line (for error messages)."""
+    a, b = node.start_mark, node.end_mark
+    if a is not None and b is not None and a.buffer is not None:
+        text = " ".join(a.buffer[a.index : b.index].split())
+    elif isinstance(node.value, str):
+        text = repr(node.value)
+    else:
+        text = f"a {type(node).__name__.removesuffix('Node').lower()}"
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def load_scenario(
     *, filename: str | Path | None = None, scenario_name: str = "default", scenario_text: str = "{}"
 ) -> Scenario:
@@ -241,9 +270,7 @@ def load_scenario(
     else:
         names = scenario_names(filename=path)
         if scenario_name not in names:
-            raise ConfigError(
-                f"scenario {scenario_name!r} not found in {source!r}; choose one of {names}"
-            )
+            raise ConfigError(_unknown_scenario(scenario_name, names, source))
         node = next(v for k, v in root.value if k.value == scenario_name)
         origin = (source, node)
         _check_keys(node, Scenario, "", f"{source} (scenario {scenario_name!r})")

@@ -14,6 +14,7 @@ import pytest
 from lunar_drake.cli import build_parser, main
 from lunar_drake.cli.run import describe_estimate, describe_goals, resolve_run_scenario
 from lunar_drake.cli.scenarios import INTERNAL_SCENARIOS, short_description
+from lunar_drake.errors import OutOfRangeError
 from lunar_drake.scenario_files import dump_scenario, load_scenario, scenario_names
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +34,7 @@ def test_help_texts_have_no_rest_markup_and_say_where_to_start():
     top = parser.format_help()
     assert top.startswith("usage: lunar-drake")
     assert "``" not in top and ":func:" not in top
-    assert "lunar-drake run --scenario small" in top and "lunar-drake scenarios" in top
+    assert "lunar-drake run --scenario goto" in top and "lunar-drake scenarios" in top
     names = dict(_subparsers(parser))
     expected = {"run", "scenarios", "plan", "render", "terrain", "terrain synth", "world",
                 "world build", "trade", "slip-study", "vo-study", "slip-fit", "ephemeris",
@@ -50,7 +51,7 @@ def test_run_help_gives_the_defaults():
     assert "(default: default)" in text  # --scenario
     assert "(default: 127.0.0.1)" in text  # --meshcat-host
     assert "(default: runs/<scenario>)" in text  # --out
-    assert "--scenario small" in text  # the epilog's first look
+    assert "--scenario goto" in text  # the epilog's first look
 
 
 def test_main_help_exits_zero(capsys):
@@ -134,13 +135,19 @@ def test_the_line_before_a_run_gives_time_size_and_a_first_look():
     text = describe_estimate(default, meshcat=True, out=Path("runs/default"))
     assert f"simulates {default.simulation_duration:g} s with the stereo cameras" in text
     assert "min on 2 cores" in text and "meshcat.html ~" in text and "frames/ ~" in text
-    assert "--scenario small" in text and "run.mcap ~" in text
+    assert "--scenario goto" in text and "run.mcap ~" in text
     paced = describe_estimate(default, meshcat=True, out=Path("runs/default"), rate=1.0)
     assert f"about {math.ceil(default.simulation_duration / 60)} min" in paced  # 1x real time
     small, _ = resolve_run_scenario(_run_args(scenario="small"))
     text = describe_estimate(small, meshcat=False, out=Path("runs/small"))
-    assert "under a minute" in text and "--scenario small" not in text
+    assert "under a minute" in text and "--scenario goto" not in text
     assert "meshcat.html" not in text
+
+
+def test_duration_flag_out_of_range_is_named_as_the_flag():
+    for bad in ("-3", "nan", "1e9"):
+        with pytest.raises(OutOfRangeError, match=r"^--duration = \S+ is out of range; allowed"):
+            resolve_run_scenario(_run_args(scenario="small", duration=float(bad)))
 
 
 def test_goals_are_emptied_of_the_unused_route_and_the_dump_reproduces():

@@ -239,8 +239,23 @@ def test_yaml_never_executes_code(tmp_path):
 def test_missing_file_and_name():
     with pytest.raises(ConfigError, match=r"/no/such/file\.yaml.*does not exist"):
         load_scenario(filename="/no/such/file.yaml")
-    with pytest.raises(LunarDrakeError, match="'nope' not found"):
+    with pytest.raises(LunarDrakeError, match="'nope' not found") as exc:
         load_scenario(scenario_name="nope")
+    assert "did you mean" not in str(exc.value) and "'goto'" in str(exc.value)
+    assert "Defaults" not in str(exc.value)  # the internal test scenarios are not offered
+    for typo in ("smal", "Small", "gotto"):
+        want = "goto" if typo == "gotto" else "small"
+        with pytest.raises(ConfigError, match=f"did you mean '{want}'\\? choose one of"):
+            load_scenario(scenario_name=typo)
+
+
+def test_a_range_names_integer_ends_exactly_and_a_node_as_written():
+    seed = r"random_seed = -1 is out of range; allowed \[0, 2\*\*63 - 1\]$"
+    with pytest.raises(OutOfRangeError, match=seed):
+        load_scenario(scenario_name="small", scenario_text="{random_seed: -1}")
+    goal = r"ground\.goals\[0\] must be a mapping of keys \(x_m, y_m\), not \[12\.5, 0\]$"
+    with pytest.raises(ConfigError, match=goal):
+        load_scenario(scenario_name="small", scenario_text="{ground: {goals: [[12.5, 0]]}}")
 
 
 @pytest.mark.parametrize(

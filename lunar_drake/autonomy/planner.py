@@ -41,7 +41,8 @@ def _cell(costmap: Costmap, xy, what: str) -> tuple:
         rows, cols = costmap.shape
         raise OutOfBoundsError(
             f"{what} ({x:.2f}, {y:.2f}) m is off the map: x in [{x0:g}, {x0 + cols * res:g}], "
-            f"y in [{y1 - rows * res:g}, {y1:g}] m"
+            f"y in [{y1 - rows * res:g}, {y1:g}] m (whole {res:g} m cells; a site edge "
+            f"narrower than a cell is left out)"
         )
     return r, c
 

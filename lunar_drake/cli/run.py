@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+import os
 import time
 from pathlib import Path
 
 from lunar_drake.cli._common import add_subcommand, plural, split_scenario
-from lunar_drake.errors import ConfigError
+from lunar_drake.errors import ConfigError, check_range
 
 #: Simulated seconds per wall second on a 2-core machine (low, high), with the stereo
 #: cameras and without: the range of `benchmarks/mission_rate.py` and whole default
@@ -94,10 +95,21 @@ def describe_estimate(scenario, *, meshcat: bool, out: Path, rate: float | None 
     )
     if e["minutes"][1] > 3.0 or e["total_bytes"] > 50e6:
         text += (
-            "\nFor a first look: --scenario small (seconds); --no-cameras and --no-meshcat "
+            "\nFor a first look: --scenario goto (about a minute); --no-cameras and --no-meshcat "
             "make any run faster and smaller."
         )
     return text
+
+
+def kernels_cached() -> bool:
+    """True if numba's on-disk cache holds the mission's compiled kernels (judged by the
+    wheel-soil contact's step, which every mission runs); True when that cannot be told."""
+    try:
+        from lunar_drake.dynamics import contact_kernels
+
+        return os.path.exists(contact_kernels.step_kinematics._cache._cache_file._index_path)
+    except Exception:  # numba internals moved: say nothing
+        return True
 
 
 def _soil_override(arg: str) -> dict:
@@ -134,6 +146,7 @@ def resolve_run_scenario(args):
     is emptied, so ``scenario.yaml`` shows only what drives the rover."""
     import yaml
 
+    from lunar_drake.scenario import MAX_DURATION_S
     from lunar_drake.scenario_files import apply_overrides, load_scenario
 
     filename, name = split_scenario(args.scenario)
@@ -142,6 +155,7 @@ def resolve_run_scenario(args):
     )
     flags: dict = {}
     if args.duration is not None:
+        check_range("--duration", float(args.duration), 0.0, MAX_DURATION_S, unit=" s")
         flags["simulation_duration"] = float(args.duration)
     if args.no_cameras:
         flags["sensors"] = {"camera": {"enabled": False}}
@@ -288,6 +302,9 @@ def _run(args, *, scenario, name: str, out: Path, rate, server, observer) -> int
         f"Scenario {scenario.name or name!r} (seed {scenario.random_seed}); building the site...",
         flush=True,
     )
+    if not kernels_cached():
+        print("First run here: numba compiles the simulator's kernels once (about two "
+              "minutes on 2 cores); later runs start at once.", flush=True)  # fmt: skip
     observers = [observer] if observer is not None else []
     if observer is not None and meshcat is not None:
         from lunar_drake.mission_control.meshcat_controls import MeshcatControls
@@ -378,7 +395,7 @@ def _report(summary: dict, *, timing: dict, t_site: float, scenario, out: Path, 
     if pw:
         per_m = f", {pw['Wh_per_m']:.3f} Wh/m" if pw["Wh_per_m"] is not None else ""
         print(
-            f"Power: array {pw['energy_generated_Wh']:.1f} Wh, loads {pw['energy_used_Wh']:.1f} Wh"
+            f"Power: array {pw['energy_generated_Wh']:.2f} Wh, loads {pw['energy_used_Wh']:.2f} Wh"
             f"{per_m}; SOC {100 * pw['final_soc']:.1f}% at the end (min "
             f"{100 * pw['min_soc']:.1f}%); {pw['shadow_s']:.0f} s without direct sun on the panel"
         )
@@ -459,7 +476,7 @@ def add_parser(sub) -> None:
         sub, "run", help="run a mission scenario (the main job)",
         epilog="The default scenario simulates 700 s with the stereo cameras: minutes on "
                "2 cores and a few hundred MB of frames and Meshcat replay. For a first "
-               "look: lunar-drake run --scenario small. List the scenarios with "
+               "look: lunar-drake run --scenario goto (about a minute). List the scenarios with "
                "lunar-drake scenarios.",
     )  # fmt: skip
     r.add_argument(

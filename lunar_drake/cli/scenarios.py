@@ -6,10 +6,8 @@ import re
 from pathlib import Path
 
 from lunar_drake.cli._common import add_subcommand
+from lunar_drake.scenario_files import INTERNAL_SCENARIOS  # hidden unless --all
 
-#: Test scenarios in Drake's style (``Defaults: {}``: every default; ``OneOfEverything``:
-#: every field set), hidden from the listing unless ``--all``.
-INTERNAL_SCENARIOS = ("Defaults", "OneOfEverything")
 #: Longest description, in characters, before it is cut at a clause or word.
 DESCRIPTION_CHARS = 72
 

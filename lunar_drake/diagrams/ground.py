@@ -240,7 +240,8 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
             rows, cols = costmap.shape
             raise OutOfBoundsError(
                 f"ground.actions[{k}]: goal ({a.x_m:.2f}, {a.y_m:.2f}) m is off the ground's "
-                f"map: x in [{x0:g}, {x0 + cols * res:g}], y in [{y1 - rows * res:g}, {y1:g}] m"
+                f"map: x in [{x0:g}, {x0 + cols * res:g}], y in [{y1 - rows * res:g}, {y1:g}] m "
+                f"(whole {res:g} m cells; a site edge narrower than a cell is left out)"
             )
 
     def no_map(start_xy, goal_xy):
