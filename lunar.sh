@@ -81,7 +81,7 @@ a few minutes), then runs COMMAND:
   ./lunar.sh run [OPTIONS]          a mission (the default one if no --scenario; also
                                     what ./lunar.sh alone does): minutes on 2 cores and a
                                     few hundred MB in runs/default; --scenario goto is a
-                                    first look in about a minute
+                                    first look in a minute or two
   ./lunar.sh run --serve            a live mission: prints the mission-control URL (Open
                                     MCT), paced to real time; drive the rover from the page
   ./lunar.sh serve RUN_DIR          a finished run in the mission-control page

@@ -8,6 +8,8 @@ Messages quote the offending value and say what is allowed.
 
 from __future__ import annotations
 
+import numbers
+
 
 class LunarDrakeError(Exception):
     """Root of every error raised on purpose by lunar_drake."""
@@ -77,7 +79,8 @@ def check_range(name: str, value, lo, hi, *, lo_open=False, hi_open=False, unit=
 def _bound(v) -> str:
     """A range end as written: ``%g`` for floats; an integer exactly (``2**63 - 1``
     rather than 9.22337e+18)."""
-    if isinstance(v, int) and not isinstance(v, bool):
+    if isinstance(v, numbers.Integral) and not isinstance(v, bool):
+        v = int(v)
         if v > 2**20 and (v + 1) & v == 0:
             return f"2**{(v + 1).bit_length() - 1} - 1"
         return str(v)

@@ -430,9 +430,9 @@ class LoggingConfig:
     save_frames: bool = True
 
 
-
 MAX_DURATION_S = 1.0e7
 """The longest ``simulation_duration`` a scenario may ask for (s)."""
+
 
 @dc.dataclass
 class Scenario:

@@ -95,9 +95,8 @@ def _check_scalar(node, schema, path: str, source: str) -> None:
     where it wants one."""
     if typing.get_origin(schema) is list and not isinstance(node, yaml.SequenceNode):
         if not (isinstance(node, yaml.ScalarNode) and node.tag.endswith(":null")):
-            shown = node.value if isinstance(node, yaml.ScalarNode) else "a mapping"
             raise ConfigError(f"{_where(source, node)}: {path} must be a list ([...]), "
-                              f"not {shown!r}")  # fmt: skip
+                              f"not {_node_text(node)}")  # fmt: skip
         return
     if not isinstance(node, yaml.ScalarNode):
         return
@@ -228,21 +227,23 @@ def _unknown_scenario(name: str, names: list[str], source: str) -> str:
     import difflib
 
     shown = [n for n in names if n not in INTERNAL_SCENARIOS] or names
-    lower = {n.lower(): n for n in names}
+    lower = {n.lower(): n for n in shown}
     close = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=0.6)
     hint = f"did you mean {lower[close[0]]!r}? " if close else ""
     return f"scenario {name!r} not found in {source!r}; {hint}choose one of {shown}"
 
 
 def _node_text(node) -> str:
-    """A YAML node's text as the user wrote it, on one line (for error messages)."""
-    a, b = node.start_mark, node.end_mark
-    if a is not None and b is not None and a.buffer is not None:
-        text = " ".join(a.buffer[a.index : b.index].split())
-    elif isinstance(node.value, str):
-        text = repr(node.value)
-    else:
-        text = f"a {type(node).__name__.removesuffix('Node').lower()}"
+    """A YAML node's value on one line in flow style, comments left out (for error
+    messages): ``[12.5, 0]``, ``{a: 1}``, ``'3'``."""
+    try:
+        value = yaml.safe_load(yaml.serialize(node))
+        text = yaml.safe_dump(value, default_flow_style=True, width=1 << 20).strip()
+        text = text.removesuffix("...").strip()
+        if isinstance(node, yaml.ScalarNode):
+            text = repr(node.value)
+    except (yaml.YAMLError, ValueError, TypeError):
+        text = repr(node.value) if isinstance(node.value, str) else "a YAML collection"
     return text if len(text) <= 80 else text[:77] + "..."
 
 

@@ -142,6 +142,9 @@ def test_the_line_before_a_run_gives_time_size_and_a_first_look():
     text = describe_estimate(small, meshcat=False, out=Path("runs/small"))
     assert "under a minute" in text and "--scenario goto" not in text
     assert "meshcat.html" not in text
+    goto, _ = resolve_run_scenario(_run_args(scenario="goto"))
+    text = describe_estimate(goto, meshcat=True, out=Path("runs/goto"))
+    assert "For a first look" not in text  # it is the first look
 
 
 def test_duration_flag_out_of_range_is_named_as_the_flag():

@@ -243,8 +243,8 @@ def test_missing_file_and_name():
         load_scenario(scenario_name="nope")
     assert "did you mean" not in str(exc.value) and "'goto'" in str(exc.value)
     assert "Defaults" not in str(exc.value)  # the internal test scenarios are not offered
-    for typo in ("smal", "Small", "gotto"):
-        want = "goto" if typo == "gotto" else "small"
+    for typo, want in (("smal", "small"), ("Small", "small"), ("gotto", "goto"),
+                       ("defaults", "default")):  # fmt: skip
         with pytest.raises(ConfigError, match=f"did you mean '{want}'\\? choose one of"):
             load_scenario(scenario_name=typo)
 

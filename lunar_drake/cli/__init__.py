@@ -26,8 +26,8 @@ delayed link, science instruments on a world model).
 
 Start with:
   lunar-drake scenarios                  the shipped missions, one line each
-  lunar-drake run --scenario goto        a first look: one goal on a small site, about a
-                                         minute on 2 cores
+  lunar-drake run --scenario goto        a first look: one goal on a small site, a minute
+                                         or two on 2 cores
   lunar-drake run                        the default mission (minutes; ~240 MB with
                                          its frames and Meshcat replay)
   lunar-drake run --scenario goto --serve

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from pathlib import Path
 
@@ -93,22 +92,23 @@ def describe_estimate(scenario, *, meshcat: bool, out: Path, rate: float | None 
         f"{'with' if cam else 'without'} the stereo cameras: {_minutes(*e['minutes'])} on "
         f"2 cores, and writes {size}{detail} to {out}."
     )
-    if e["minutes"][1] > 3.0 or e["total_bytes"] > 50e6:
+    if (e["minutes"][1] > 3.0 or e["total_bytes"] > 50e6) and scenario.name != "goto":
         text += (
-            "\nFor a first look: --scenario goto (about a minute); --no-cameras and --no-meshcat "
-            "make any run faster and smaller."
+            "\nFor a first look: --scenario goto --no-meshcat (a minute or two); --no-cameras "
+            "and --no-meshcat make any run faster and smaller."
         )
     return text
 
 
 def kernels_cached() -> bool:
-    """True if numba's on-disk cache holds the mission's compiled kernels (judged by the
-    wheel-soil contact's step, which every mission runs); True when that cannot be told."""
+    """True if numba's on-disk cache holds the mission's compiled kernels for this source
+    and numba version (judged by the wheel-soil contact's step, which every mission runs;
+    wherever numba keeps its cache); True when that cannot be told."""
     try:
         from lunar_drake.dynamics import contact_kernels
 
-        return os.path.exists(contact_kernels.step_kinematics._cache._cache_file._index_path)
-    except Exception:  # numba internals moved: say nothing
+        return bool(contact_kernels.step_kinematics._cache._cache_file._load_index())
+    except Exception:  # numba internals moved or an unreadable index: say nothing
         return True
 
 
@@ -476,7 +476,7 @@ def add_parser(sub) -> None:
         sub, "run", help="run a mission scenario (the main job)",
         epilog="The default scenario simulates 700 s with the stereo cameras: minutes on "
                "2 cores and a few hundred MB of frames and Meshcat replay. For a first "
-               "look: lunar-drake run --scenario goto (about a minute). List the scenarios with "
+               "look: lunar-drake run --scenario goto (a minute or two). List the scenarios with "
                "lunar-drake scenarios.",
     )  # fmt: skip
     r.add_argument(

@@ -59,7 +59,6 @@ class Imu(SampledSensor):
         bias0 = imu_initial_bias(generator(seed, f"{name}/initial_bias"), config=self._config)
         self._bias = self.DeclareDiscreteState(BasicVector(bias0))
         self.bias_truth_output = self.DeclareStateOutputPort("bias_truth", self._bias)
-        self._ideal = np.empty(6)
 
     @property
     def config(self) -> ImuConfig:
@@ -67,9 +66,9 @@ class Imu(SampledSensor):
         return self._config
 
     def sample(self, context, generator, discrete_state):
-        ideal = self._ideal
-        ideal[:3] = self.angular_velocity_input.Eval(context)
-        ideal[3:] = self.specific_force_input.Eval(context)
+        ideal = np.concatenate(
+            [self.angular_velocity_input.Eval(context), self.specific_force_input.Eval(context)]
+        )
         bias = context.get_discrete_state(self._bias).get_value()
         meas, next_bias = imu_measurement(ideal, bias, generator, config=self._config)
         discrete_state.set_value(self._bias, next_bias)
