@@ -96,9 +96,10 @@ def test_mission_drives_to_the_goal_through_the_link(cache):
 
 @pytest.mark.parametrize(
     ("goal", "match"),
-    [("{x_m: 80.0, y_m: 0.0}", r"ground.goals\[0\]: goal .* off the map"),
+    [("{x_m: 80.0, y_m: 0.0}", r"ground.goals\[0\]: goal .* off the map: x in .* cells"),
      ("{x_m: 8.0, y_m: 6.0}", r"ground.goals\[0\]: goal .* inside a hazard"),
-     (None, r"ground.actions\[0\]: goal \(500.00, 0.00\) m is off the ground's map")],
+     (None, r"ground.actions\[0\]: goal \(500.00, 0.00\) m is off the ground's map: "
+            r"x in \[-12.8, \S+\], y in \[\S+, 12.8\] m \(whole \S+ m cells")],
 )  # fmt: skip
 def test_bad_goals_are_one_line_errors_and_write_nothing(cache, tmp_path, capsys, goal, match):
     import re

@@ -189,6 +189,17 @@ class Costmap:
     def inside(self, row: int, col: int) -> bool:
         return 0 <= row < self.cost.shape[0] and 0 <= col < self.cost.shape[1]
 
+    def extent_text(self) -> str:
+        """The grid's extent for messages (site m): ``x in [x0, x1], y in [y0, y1] m``,
+        and that it holds whole cells only."""
+        res = self.resolution_m
+        rows, cols = self.shape
+        return (
+            f"x in [{self.x0_m:g}, {self.x0_m + cols * res:g}], "
+            f"y in [{self.y1_m - rows * res:g}, {self.y1_m:g}] m (whole {res:g} m cells; a "
+            f"site edge narrower than a cell is left out)"
+        )
+
 
 def _block_max(a: np.ndarray, k: int) -> np.ndarray:
     r, c = (a.shape[0] // k) * k, (a.shape[1] // k) * k

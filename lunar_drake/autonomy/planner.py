@@ -37,12 +37,8 @@ def _cell(costmap: Costmap, xy, what: str) -> tuple:
         raise OutOfRangeError(f"{what} = ({x!r}, {y!r}) m must be finite site coordinates")
     r, c = costmap.cell_of(x, y)
     if not costmap.inside(r, c):
-        x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
-        rows, cols = costmap.shape
         raise OutOfBoundsError(
-            f"{what} ({x:.2f}, {y:.2f}) m is off the map: x in [{x0:g}, {x0 + cols * res:g}], "
-            f"y in [{y1 - rows * res:g}, {y1:g}] m (whole {res:g} m cells; a site edge "
-            f"narrower than a cell is left out)"
+            f"{what} ({x:.2f}, {y:.2f}) m is off the map: {costmap.extent_text()}"
         )
     return r, c
 

@@ -236,12 +236,9 @@ def MakeGroundDiagram(*, scenario: Scenario, map_product=None):
         goal_commands(scenario, costmap=costmap)  # refuse what the map cannot serve
     for k, a in enumerate(g.actions):
         if a.action == "goal" and not in_map(a.x_m, a.y_m):
-            x0, y1, res = costmap.x0_m, costmap.y1_m, costmap.resolution_m
-            rows, cols = costmap.shape
             raise OutOfBoundsError(
                 f"ground.actions[{k}]: goal ({a.x_m:.2f}, {a.y_m:.2f}) m is off the ground's "
-                f"map: x in [{x0:g}, {x0 + cols * res:g}], y in [{y1 - rows * res:g}, {y1:g}] m "
-                f"(whole {res:g} m cells; a site edge narrower than a cell is left out)"
+                f"map: {costmap.extent_text()}"
             )
 
     def no_map(start_xy, goal_xy):
