@@ -131,42 +131,29 @@ STAGE1_BLOCKS = (
 
 
 @numba.njit(cache=True)
-def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radius, par,
-                    const, p_belly):  # pragma: no cover - numba  # fmt: skip
-    """Stage 1 in one call, from the bodies' poses ``X`` (m, 3, 4) and spatial velocities
-    ``V`` (m, 6) = [w, v] (the first ``n`` are the wheels), an in-memory raster
-    (:func:`~lunar_drake.terrain.heightfield.heights_in_box`' arguments, the box already
-    shrunk by the margin), the footprint pattern ``U, Wc, pinv`` and the belly points
-    ``p_belly`` (k, 3) in W: the same calls, in the same order, as
-    :func:`~lunar_drake.dynamics.contact_geometry.wheel_contact_geometry`,
-    :func:`kinematics` and the belly points' heights (the same bits).
+def points_in_world(X, pts_B):  # pragma: no cover - numba
+    """(k, 3) points ``pts_B`` (k, 3) of a body (m, its frame) in W, the body's pose
+    ``X`` (3, 4) = [R | p]: ``p + R pts_B``."""
+    k = pts_B.shape[0]
+    out = np.empty((k, 3))
+    for i in range(k):
+        for r in range(3):
+            out[i, r] = X[r, 3] + (
+                X[r, 0] * pts_B[i, 0] + X[r, 1] * pts_B[i, 1] + X[r, 2] * pts_B[i, 2]
+            )
+    return out
 
-    Returns:
-        (values, flags): ``values`` the :data:`STAGE1_BLOCKS` one after the other
-        (``33 n`` values), then the belly points' penetration (k,) (m; -inf off the
-        raster); ``flags`` (n + k,) bool: each wheel's footprint on the raster, then
-        each belly point's.
-    """
-    p = np.ascontiguousarray(X[:n, :, 3])
-    axle = np.ascontiguousarray(X[:n, :, 1])
-    v = np.ascontiguousarray(V[:n, 3:])
-    wv = np.ascontiguousarray(V[:n, :3])
-    sinkage, n_W, forward, lateral, p_WC, off = geometry_in_memory(
-        z, res, left, right, bottom, top, p, axle, U, Wc, pinv, radius
-    )
-    on = ~off
-    state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil = kinematics(
-        v, wv, axle, sinkage, n_W, forward, lateral, on, par, const
-    )
-    k = p_belly.shape[0]
-    zt, ok = heights_in_box(
-        z, np.ascontiguousarray(p_belly[:, 0]), np.ascontiguousarray(p_belly[:, 1]), res,
-        left, right, bottom, top,
-    )  # fmt: skip
+
+@numba.njit(cache=True)
+def pack_stage1(p, axle, n_W, forward, lateral, r_c, state, N, slip_velocity, omega_r, length,
+                ws, fx, fy, m_soil, pen):  # pragma: no cover - numba  # fmt: skip
+    """The :data:`STAGE1_BLOCKS` one after the other (``33 n`` values), then the belly
+    points' penetration ``pen`` (k,)."""
+    n = N.shape[0]
+    k = pen.shape[0]
     out = np.empty(33 * n + k)
-    flags = np.empty(n + k, np.bool_)
     o = 0
-    for a in (p, axle, n_W, forward, lateral, p_WC - p):
+    for a in (p, axle, n_W, forward, lateral, r_c):
         out[o : o + 3 * n] = a.ravel()
         o += 3 * n
     out[o : o + 6 * n] = state.ravel()
@@ -178,11 +165,82 @@ def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radi
     for a in (omega_r, length, ws, fx, fy, m_soil):
         out[o : o + n] = a
         o += n
+    out[o:] = pen
+    return out
+
+
+@numba.njit(cache=True)
+def _unpack(values, n):  # pragma: no cover - numba
+    """Views of :func:`pack_stage1`'s blocks, in :data:`STAGE1_BLOCKS` order."""
+    m = 3 * n
+    p = values[0:m].reshape(n, 3)
+    axle = values[m : 2 * m].reshape(n, 3)
+    n_W = values[2 * m : 3 * m].reshape(n, 3)
+    forward = values[3 * m : 4 * m].reshape(n, 3)
+    lateral = values[4 * m : 5 * m].reshape(n, 3)
+    r_c = values[5 * m : 6 * m].reshape(n, 3)
+    o = 6 * m
+    state = values[o : o + 6 * n].reshape(n, 6)
+    o += 6 * n
+    N = values[o : o + n]
+    o += n
+    slip_velocity = values[o : o + 2 * n].reshape(n, 2)
+    o += 2 * n
+    omega_r = values[o : o + n]
+    length = values[o + n : o + 2 * n]
+    ws = values[o + 2 * n : o + 3 * n]
+    fx = values[o + 3 * n : o + 4 * n]
+    fy = values[o + 4 * n : o + 5 * n]
+    m_soil = values[o + 5 * n : o + 6 * n]
+    return (p, axle, n_W, forward, lateral, r_c, state, N, slip_velocity, omega_r, length,
+            ws, fx, fy, m_soil)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radius, par,
+                    const, belly_B):  # pragma: no cover - numba  # fmt: skip
+    """Stage 1 in one call, from the bodies' poses ``X`` (m, 3, 4) and spatial velocities
+    ``V`` (m, 6) = [w, v] (the first ``n`` are the wheels, then the chassis when
+    ``belly_B`` has points), an in-memory raster
+    (:func:`~lunar_drake.terrain.heightfield.heights_in_box`' arguments, the box already
+    shrunk by the margin), the footprint pattern ``U, Wc, pinv`` and the belly points
+    ``belly_B`` (k, 3) in the chassis frame: the same calls, in the same order, as
+    :func:`points_in_world`,
+    :func:`~lunar_drake.dynamics.contact_geometry.wheel_contact_geometry`,
+    :func:`kinematics` and the belly points' heights (the same bits).
+
+    Returns:
+        (values, flags, p_belly): ``values`` :func:`pack_stage1`'s (``33 n`` values, then
+        the belly points' penetration (k,), m; -inf off the raster); ``flags`` (n + k,)
+        bool: each wheel's footprint on the raster, then each belly point's; the belly
+        points (k, 3) in W.
+    """
+    k = belly_B.shape[0]
+    p_belly = points_in_world(X[n], belly_B) if k > 0 else np.zeros((0, 3))
+    p = np.ascontiguousarray(X[:n, :, 3])
+    axle = np.ascontiguousarray(X[:n, :, 1])
+    v = np.ascontiguousarray(V[:n, 3:])
+    wv = np.ascontiguousarray(V[:n, :3])
+    sinkage, n_W, forward, lateral, p_WC, off = geometry_in_memory(
+        z, res, left, right, bottom, top, p, axle, U, Wc, pinv, radius
+    )
+    on = ~off
+    state, N, slip_velocity, omega_r, length, ws, fx, fy, m_soil = kinematics(
+        v, wv, axle, sinkage, n_W, forward, lateral, on, par, const
+    )
+    zt, ok = heights_in_box(
+        z, np.ascontiguousarray(p_belly[:, 0]), np.ascontiguousarray(p_belly[:, 1]), res,
+        left, right, bottom, top,
+    )  # fmt: skip
+    pen = np.empty(k)
     for i in range(k):
-        out[o + i] = zt[i] - p_belly[i, 2] if ok[i] else -np.inf
+        pen[i] = zt[i] - p_belly[i, 2] if ok[i] else -np.inf
+    out = pack_stage1(p, axle, n_W, forward, lateral, p_WC - p, state, N, slip_velocity,
+                      omega_r, length, ws, fx, fy, m_soil, pen)  # fmt: skip
+    flags = np.empty(n + k, np.bool_)
     flags[:n] = on
     flags[n:] = ok
-    return out, flags
+    return out, flags, p_belly
 
 
 @numba.njit(cache=True)
@@ -265,3 +323,28 @@ def patch_update(j, slip_velocity, rolling_speed, length, dt, const,
         jn[i, 0] = a * s
         jn[i, 1] = b * s
     return jn
+
+
+@numba.njit(cache=True)
+def step_forces(values, n, on, j, const):  # pragma: no cover - numba
+    """Stage 2 from :func:`pack_stage1`'s ``values``, the wheels' ``on`` (n,) and the
+    patch displacement ``j`` (n, 2): (spatial force (n, 6) = [moment about the wheel
+    centre, force], world; the wheel_state rows (n, 6) with the blended drawbar pull),
+    by :func:`forces`."""
+    (_, axle, n_W, forward, lateral, r_c, state, N, slip_velocity, _, length, ws, fx, fy,
+     m_soil) = _unpack(values, n)  # fmt: skip
+    F, tau, drawbar = forces(j, N, slip_velocity, length, ws, fx, fy, m_soil, n_W, forward,
+                             lateral, r_c, axle, on, const)  # fmt: skip
+    F6 = np.empty((n, 6))
+    F6[:, :3] = tau
+    F6[:, 3:] = F
+    rows = state.copy()
+    rows[:, 4] = drawbar
+    return F6, rows
+
+
+@numba.njit(cache=True)
+def step_patch(values, n, j, dt, const, saturation):  # pragma: no cover - numba
+    """:func:`patch_update` from :func:`pack_stage1`'s ``values``."""
+    parts = _unpack(values, n)
+    return patch_update(j, parts[8], parts[9], parts[10], dt, const, saturation)

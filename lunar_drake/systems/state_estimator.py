@@ -9,17 +9,13 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from lunar_drake.autonomy import ekf
-from lunar_drake.autonomy.odometry import body_displacement
+from lunar_drake.autonomy import estimator_tick as core
 from lunar_drake.dynamics.kinematics import wheel_geometry_for
 from lunar_drake.moon import GRAVITY_MPS2
 
 N_WHEELS = 4
-_X = slice(0, ekf.NX)  # nominal state
-_PC = slice(ekf.NX, ekf.NX + ekf.N_ERR**2)  # covariance, row-major
-_FIX = slice(_PC.stop, _PC.stop + 4)  # the last star-tracker fix seen
-_ANGLES = slice(_FIX.stop, _FIX.stop + N_WHEELS)  # wheel angles at the previous tick
-_STARTED = _ANGLES.stop
-_SIZE = _STARTED + 1
+_X, _PC = core.X, core.PC
+_ANGLES, _STARTED, _SIZE = core.layout(N_WHEELS)
 
 
 class StateEstimator(LeafSystem):
@@ -67,6 +63,13 @@ class StateEstimator(LeafSystem):
         self._geometry = wheel_geometry_for(description)
         self._skid = description.steering == "skid"
         self._dt = 1.0 / float(config.rate_hz)
+        g = self._geometry
+        # the compiled tick's arguments that do not change (core.tick)
+        self._tick_args = (
+            self._dt, self._skid, core.skid_pinv(g) if self._skid else np.zeros((2, N_WHEELS)),
+            g.p_BS, g.steering_offset, g.wheel_radius, *self._params,
+        )  # fmt: skip
+        self._no_steer = np.zeros(N_WHEELS)
         self.wheel_angles_input = self.DeclareVectorInputPort("wheel_angles", N_WHEELS)
         self.q_WB_input = self.DeclareVectorInputPort("q_WB_measured", 4)
         self.imu_input = self.DeclareVectorInputPort("imu", 6)
@@ -115,36 +118,34 @@ class StateEstimator(LeafSystem):
         return s[_X].copy(), s[_PC].reshape(ekf.N_ERR, ekf.N_ERR).copy()
 
     def _update(self, context, discrete_state):
-        s = self._s(context).copy()
-        x, P = s[_X], s[_PC].reshape(ekf.N_ERR, ekf.N_ERR)  # views of the copy (read only)
+        s = self._s(context)
         cfg = self._config
-        angles = np.asarray(self.wheel_angles_input.Eval(context), float)
-        fix = np.asarray(self.q_WB_input.Eval(context), float)
-        imu = np.asarray(self.imu_input.Eval(context), float)
+        angles = self.wheel_angles_input.Eval(context)
+        fix = self.q_WB_input.Eval(context)
+        imu = self.imu_input.Eval(context)
+        steer = self._no_steer if self._skid else self.steer_input.Eval(context)
         # Sensor samples taken at a tick are visible from the next tick (they land in the
         # same discrete update as this one), so a new star-tracker fix and the IMU
         # reading describe the previous tick: the state before this tick's prediction.
         # Update first, then predict to now. At the first tick (t = 0) the sensors still
         # show their initial values: only record them.
         started = s[_STARTED] > 0.5
-        new_fix = started and np.linalg.norm(fix) > 0.5 and not np.array_equal(fix, s[_FIX])
-        if cfg.use_star_tracker and new_fix:
-            x, P, _ = ekf.update_attitude(x, P, q_measured=fix, config=cfg)
+        new_fix = cfg.use_star_tracker and core.fix_is_new(s, fix)
         tick = round(context.get_time() / self._dt)
-        if cfg.use_tilt and started and tick % cfg.tilt_every == 0:
-            x, P, _ = ekf.update_tilt(
-                x, P, accel_mps2=imu[3:6], gyro_radps=imu[:3], gravity_mps2=GRAVITY_MPS2,
-                config=cfg,
-            )  # fmt: skip
-        if started:
-            steer = np.zeros(N_WHEELS) if self._skid else self.steer_input.Eval(context)
-            d = body_displacement(angles - s[_ANGLES], steer, geometry=self._geometry,
-                                  skid=self._skid)  # fmt: skip
-            x, P = ekf.predict(x, P, gyro_radps=imu[:3], d_body=d[:2], dt=self._dt, config=cfg,
-                               params=self._params)  # fmt: skip
-        s[_X] = x
-        s[_PC] = P.ravel()
-        s[_FIX] = fix
-        s[_ANGLES] = angles
-        s[_STARTED] = 1.0
-        discrete_state.get_mutable_vector(self._state).SetFromVector(s)
+        tilt = cfg.use_tilt and started and tick % cfg.tilt_every == 0
+        if new_fix or tilt:
+            s = s.copy()
+            x, P = s[_X], s[_PC].reshape(ekf.N_ERR, ekf.N_ERR)  # views of the copy (read only)
+            if new_fix:
+                x, P, _ = ekf.update_attitude(x, P, q_measured=fix, config=cfg)
+            if tilt:
+                x, P, _ = ekf.update_tilt(
+                    x, P, accel_mps2=imu[3:6], gyro_radps=imu[:3], gravity_mps2=GRAVITY_MPS2,
+                    config=cfg,
+                )  # fmt: skip
+            s[_X] = x
+            s[_PC] = P.ravel()
+        # then predict (once started) and record the fix and the angles: one compiled call
+        discrete_state.get_mutable_vector(self._state).SetFromVector(
+            core.tick(s, angles, fix, imu, steer, *self._tick_args)
+        )

@@ -44,20 +44,8 @@ class _Kinematics(NamedTuple):
     """Stage 1 of a contact evaluation: everything that does not depend on the patch state
     (footprint geometry, loads, slip, the Wong-Reece forces, belly contact)."""
 
-    p: np.ndarray  # (n, 3) wheel centres, world
-    axle: np.ndarray  # (n, 3) axle directions, world
-    n_W: np.ndarray  # (n, 3) contact normals
-    forward_W: np.ndarray  # (n, 3) contact-frame x
-    lateral_W: np.ndarray  # (n, 3) contact-frame y
-    r_c: np.ndarray  # (n, 3) contact point relative to the wheel centre
+    values: np.ndarray  # contact_kernels.pack_stage1's blocks (wheel_state: drawbar pull 0)
     on: np.ndarray  # (n,) wheel on the raster
-    state: np.ndarray  # (n, len(WHEEL_STATE_FIELDS)) wheel_state rows (drawbar pull: 0)
-    N: np.ndarray  # (n,) normal force (N)
-    slip_velocity: np.ndarray  # (n, 2) patch slip velocity, contact frame (m/s)
-    rolling_speed: np.ndarray  # (n,) r omega (m/s)
-    patch_length: np.ndarray  # (n,) m; 0 out of contact
-    static_weight: np.ndarray  # (n,) weight of the patch force
-    dynamic: tuple  # Wong-Reece (drawbar pull, lateral, soil moment about +axle), (n,) each
     belly: tuple | None  # (force, moment about the chassis origin), world
     off: bool  # any wheel or belly point off the raster
 
@@ -65,8 +53,7 @@ class _Kinematics(NamedTuple):
 class _Contact(NamedTuple):
     """Stage 2: the forces with the patch state (the outputs' cache entry's value)."""
 
-    F: np.ndarray  # (n, 3) force on each wheel, world
-    tau: np.ndarray  # (n, 3) moment about each wheel centre, world
+    F6: np.ndarray  # (n, 6) [moment about each wheel centre, force on it], world
     state: np.ndarray  # (n, len(WHEEL_STATE_FIELDS)) wheel_state rows
     belly: tuple | None
     off: bool
@@ -286,44 +273,24 @@ class WheelRegolithContact(LeafSystem):
         # the wheels' and the chassis' poses and velocities, one array each
         X = np.array([poses[i].GetAsMatrix34() for i in self._bodies])  # (n [+1], 3, 4)
         V = np.array([vels[i].get_coeffs() for i in self._bodies])  # (n [+1], 6): [w, v]
-        has_belly = self._belly is not None and len(self._belly_pts) > 0
-        if has_belly:
-            Rb = np.ascontiguousarray(X[n, :, :3])
-            p_Bo = X[n, :, 3]
-            p_pts = p_Bo + self._belly_pts @ Rb.T
-        else:
-            p_pts = np.zeros((0, 3))
+        belly_B = self._belly_pts if self._belly is not None else np.zeros((0, 3))
         raster = hf.within_kernel_args(margin_m=hf.resolution_m)
         if raster is None:  # a file-backed raster: the functions one by one
-            return self._kinematics_file_backed(hf, X, V, par, const, p_pts, has_belly)
+            return self._kinematics_file_backed(hf, X, V, par, const, belly_B)
         w = self._wheel
         U, Wc, pinv = footprint_pattern(self._sampling, w.radius_m, w.width_m)
-        values, flags = ck.step_kinematics(
-            X, V, n, *raster, U, Wc, pinv, float(w.radius_m), par, const, p_pts
+        values, flags, p_pts = ck.step_kinematics(
+            X, V, n, *raster, U, Wc, pinv, float(w.radius_m), par, const, belly_B
         )
-        b = {}
-        o = 0
-        for name, cols in ck.STAGE1_BLOCKS:
-            size = n * cols
-            b[name] = values[o : o + size].reshape(n, cols) if cols > 1 else values[o : o + n]
-            o += size
         on = flags[:n]
+        off = not flags.all()
+        pen = values[33 * n :]
         belly = None
-        off = not on.all()
-        if has_belly:
-            pen = values[o:]
-            ok = flags[n:]
-            off = off or not ok.all()
-            belly = self._belly_contact(hf, X, V, p_pts, pen, ok)
-        return _Kinematics(
-            p=b["p"], axle=b["axle"], n_W=b["n_W"], forward_W=b["forward_W"],
-            lateral_W=b["lateral_W"], r_c=b["r_c"], on=on, state=b["state"], N=b["N"],
-            slip_velocity=b["slip_velocity"], rolling_speed=b["rolling_speed"],
-            patch_length=b["patch_length"], static_weight=b["static_weight"],
-            dynamic=(b["fx"], b["fy"], b["m_soil"]), belly=belly, off=off,
-        )  # fmt: skip
+        if len(pen) and pen.max() > 0:
+            belly = self._belly_contact(hf, X, V, p_pts, pen, flags[n:])
+        return _Kinematics(values, on, belly, off)
 
-    def _kinematics_file_backed(self, hf, X, V, par, const, p_pts, has_belly) -> _Kinematics:
+    def _kinematics_file_backed(self, hf, X, V, par, const, belly_B) -> _Kinematics:
         """Stage 1 on a file-backed raster (no compiled height lookups)."""
         n = self._n
         w = self._wheel
@@ -345,28 +312,17 @@ class WheelRegolithContact(LeafSystem):
         )
         belly = None
         off = bool((~on).any())
-        if has_belly:
+        pen = np.zeros(0)
+        if len(belly_B):
+            p_pts = ck.points_in_world(X[n], belly_B)
             pen, n_t, off_b = belly_penetration(heightfield=hf, p_WP=p_pts)
             off = off or bool(off_b.any())
             belly = self._belly_contact(hf, X, V, p_pts, pen, ~off_b, n_t=n_t)
-        return _Kinematics(
-            p=p,
-            axle=axle,
-            n_W=g.n_W,
-            forward_W=g.forward_W,
-            lateral_W=g.lateral_W,
-            r_c=g.p_WC - p,
-            on=on,
-            state=state,
-            N=N,
-            slip_velocity=slip_velocity,
-            rolling_speed=omega_r,
-            patch_length=length,  # 0 out of contact
-            static_weight=ws,
-            dynamic=(fx, fy, m_soil),
-            belly=belly,
-            off=off,
-        )
+        values = ck.pack_stage1(
+            p, axle, g.n_W, g.forward_W, g.lateral_W, g.p_WC - p, state, N, slip_velocity,
+            omega_r, length, ws, fx, fy, m_soil, np.asarray(pen, float),
+        )  # fmt: skip
+        return _Kinematics(values, on, belly, off)
 
     def _belly_contact(self, hf, X, V, p_pts, pen, ok, *, n_t=None):
         """(force, moment about the chassis origin) in W of the penalty contact at the
@@ -406,16 +362,10 @@ class WheelRegolithContact(LeafSystem):
 
     def _compute(self, context) -> _Contact:
         k = self._kinematics.Eval(context)
-        fx, fy, m_soil = k.dynamic
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
         const = self._constants(self.get_soil(context))[1]
-        F, tau, drawbar = ck.forces(
-            j, k.N, k.slip_velocity, k.patch_length, k.static_weight, fx, fy, m_soil, k.n_W,
-            k.forward_W, k.lateral_W, k.r_c, k.axle, k.on, const,
-        )  # fmt: skip
-        state = k.state.copy()
-        state[:, 4] = drawbar
-        return _Contact(F, tau, state, k.belly, k.off)
+        F6, state = ck.step_forces(k.values, self._n, k.on, j, const)
+        return _Contact(F6, state, k.belly, k.off)
 
     def _cached(self, context) -> _Contact:
         return self._cache.Eval(context)
@@ -423,9 +373,9 @@ class WheelRegolithContact(LeafSystem):
     def _update_patch(self, context, discrete_state):
         k = self._kinematics.Eval(context)
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
-        jn = ck.patch_update(j, k.slip_velocity, k.rolling_speed, k.patch_length, self._dt,
-                             self._constants(self.get_soil(context))[1],
-                             self._patch.saturation_moduli)  # fmt: skip
+        jn = ck.step_patch(k.values, self._n, j, self._dt,
+                           self._constants(self.get_soil(context))[1],
+                           self._patch.saturation_moduli)  # fmt: skip
         discrete_state.get_mutable_vector(self._patch_index).SetFromVector(jn.ravel())
 
     def _calc_forces(self, context, output):
@@ -434,7 +384,7 @@ class WheelRegolithContact(LeafSystem):
         forces = self._force_buffer
         for k, e in enumerate(forces[: self._n]):
             # Applied at the centre: the force plus its moment about the centre.
-            e.F_Bq_W = SpatialForce(c.tau[k], c.F[k])
+            e.F_Bq_W = SpatialForce(c.F6[k])
         if c.belly is None:
             output.set_value(forces[: self._n])
             return
