@@ -67,23 +67,24 @@ class SampleStream:
     """
 
     def __init__(self, key: int) -> None:
-        self._key = np.uint64(int(key))
         self._bits = np.random.Philox(key=[int(key), 0])
         self._generator = np.random.Generator(self._bits)
-
-    def at(self, index: int) -> np.random.Generator:
-        """The Generator of sample ``index`` (>= 0)."""
-        self._bits.state = {
+        # The state set at every call: only the key's second word (the index) changes;
+        # the setter copies the arrays, so they stay as they are here.
+        self._index_key = np.array([np.uint64(int(key)), np.uint64(0)], np.uint64)
+        self._state = {
             "bit_generator": "Philox",
-            "state": {
-                "counter": np.zeros(4, np.uint64),
-                "key": np.array([self._key, np.uint64(int(index))], np.uint64),
-            },
+            "state": {"counter": np.zeros(4, np.uint64), "key": self._index_key},
             "buffer": np.zeros(4, np.uint64),
             "buffer_pos": 4,
             "has_uint32": 0,
             "uinteger": 0,
         }
+
+    def at(self, index: int) -> np.random.Generator:
+        """The Generator of sample ``index`` (>= 0)."""
+        self._index_key[1] = np.uint64(int(index))
+        self._bits.state = self._state
         return self._generator
 
 

@@ -276,7 +276,7 @@ def executor_step(
         break
     if twist is None:
         twist = active.twist if active is not None else np.zeros(3)
-    moving = bool(np.any(twist != 0.0))
+    moving = bool((twist != 0.0).any())
     if moving:
         still = None
     else:

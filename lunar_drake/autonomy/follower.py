@@ -113,27 +113,34 @@ def aim_point(xy, waypoints, index: int, lookahead_m: float) -> tuple[np.ndarray
     aim is the first point of the remaining path at distance >= ``lookahead_m`` from
     ``xy`` (the last waypoint if none)."""
     p = np.asarray(xy, dtype=float)
-    wp = np.asarray(waypoints, dtype=float)
-    n = len(wp)
-    while index < n - 1 and np.hypot(*(wp[index + 1] - p)) < lookahead_m:
+    wp = np.ascontiguousarray(waypoints, dtype=float)
+    ax, ay, k = _aim_point(float(p[0]), float(p[1]), wp, int(index), float(lookahead_m))
+    return np.array([ax, ay]), k
+
+
+@numba.njit(cache=True)
+def _aim_point(px, py, wp, index, lookahead_m):  # pragma: no cover - numba
+    """:func:`aim_point` compiled: (aim x, aim y, new index)."""
+    n = wp.shape[0]
+    while index < n - 1 and math.hypot(wp[index + 1, 0] - px, wp[index + 1, 1] - py) < lookahead_m:
         index += 1
     for k in range(index, n - 1):
-        a, b = wp[k], wp[k + 1]
+        ax, ay = wp[k, 0], wp[k, 1]
         # Where the leg a->b leaves the circle of radius lookahead around p.
-        d = b - a
-        f = a - p
-        A = float(d @ d)
+        dx, dy = wp[k + 1, 0] - ax, wp[k + 1, 1] - ay
+        fx, fy = ax - px, ay - py
+        A = dx * dx + dy * dy
         if A == 0.0:
             continue
-        B = 2.0 * float(f @ d)
-        C = float(f @ f) - lookahead_m**2
+        B = 2.0 * (fx * dx + fy * dy)
+        C = (fx * fx + fy * fy) - lookahead_m**2
         disc = B * B - 4.0 * A * C
         if disc < 0.0:
             continue
         t = (-B + math.sqrt(disc)) / (2.0 * A)
         if 0.0 <= t <= 1.0:
-            return a + t * d, k
-    return wp[-1].copy(), max(index, n - 2 if n >= 2 else 0)
+            return ax + t * dx, ay + t * dy, k
+    return wp[n - 1, 0], wp[n - 1, 1], max(index, n - 2 if n >= 2 else 0)
 
 
 def sun_heading(leg_rad: float, yaw_des_rad: float, max_crab_rad: float) -> float:
@@ -174,12 +181,12 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     ``path``, it faces the direction of travel.
     """
     params = params or FollowerParams()
-    x, y, yaw = (float(v) for v in pose)
-    wp = np.asarray(waypoints, dtype=float)
-    if np.hypot(wp[-1, 0] - x, wp[-1, 1] - y) <= tolerance_m:
+    x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
+    wp = np.ascontiguousarray(waypoints, dtype=float)
+    if math.hypot(wp[-1, 0] - x, wp[-1, 1] - y) <= tolerance_m:
         return np.zeros(3), len(wp) - 1, True
-    aim, index = aim_point((x, y), wp, index, params.lookahead_m)
-    dx, dy = aim[0] - x, aim[1] - y
+    ax, ay, index = _aim_point(x, y, wp, int(index), float(params.lookahead_m))
+    dx, dy = ax - x, ay - y
     d = max(math.hypot(dx, dy), 1e-6)
     if params.heading == "sun" and sun_azimuth_rad is not None:
         leg = wp[min(index + 1, len(wp) - 1)] - wp[index]

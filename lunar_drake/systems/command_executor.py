@@ -111,14 +111,16 @@ class CommandExecutor(LeafSystem):
         )
         state.get_mutable_abstract_state(self._core).set_value(core)
         held, pan, tilt = (0.0, 0.0, 0.0) if out.mast is None else (1.0, *out.mast)
+        tw = out.twist
         state.get_mutable_discrete_state(self._out).SetFromVector(
-            np.concatenate(
+            np.array(
                 [
-                    out.twist,
-                    [float(out.brake), MODES.index(out.mode), core.last_seq],
-                    [SAFE_REASONS.index(out.safed_reason), len(core.transitions)],
-                    [core.motion_seq],
-                    [held, pan, tilt],
-                ]
+                    tw[0], tw[1], tw[2],
+                    float(out.brake), MODES.index(out.mode), core.last_seq,
+                    SAFE_REASONS.index(out.safed_reason), len(core.transitions),
+                    core.motion_seq,
+                    held, pan, tilt,
+                ],
+                dtype=float,
             )
-        )
+        )  # fmt: skip
