@@ -12,6 +12,8 @@ the first tick has recorded the sensors).
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -89,4 +91,29 @@ def tick(s, angles, fix, imu, steer, dt, skid, pinv, p_BS, offset, radius, table
     out[_FIX0:_ANGLES0] = fix
     out[a0 : a0 + n] = angles
     out[a0 + n] = 1.0
+    return out
+
+
+@numba.njit(cache=True)
+def pose(s):  # pragma: no cover - numba
+    """The pose (6,) = x, y, z (m), roll, pitch, yaw (rad) of state ``s``, as
+    :func:`~lunar_drake.autonomy.ekf.pose_and_covariance`."""
+    R = _k.quat_to_matrix(s[3:7])
+    out = np.empty(6)
+    out[0], out[1], out[2] = s[0], s[1], s[2]
+    out[3] = math.atan2(R[2, 1], R[2, 2])
+    out[4] = math.asin(max(-1.0, min(1.0, -R[2, 0])))
+    out[5] = math.atan2(R[1, 0], R[0, 0])
+    return out
+
+
+@numba.njit(cache=True)
+def pose_covariance(s):  # pragma: no cover - numba
+    """The (36,) row-major covariance of [position error, world-frame attitude error]
+    (m^2, rad^2) of state ``s``: the top-left 6 x 6 block of the EKF's."""
+    ne = _k.N_ERR
+    out = np.empty(36)
+    for r in range(6):
+        for c in range(6):
+            out[6 * r + c] = s[_PC0 + ne * r + c]
     return out

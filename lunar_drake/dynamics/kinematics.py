@@ -79,9 +79,11 @@ __all__ = [
     "SteeringLimitError",
     "WheelGeometry",
     "explicit_steer_commands",
+    "explicit_steer_one",
     "explicit_steer_twist",
     "skid_steer_twist",
     "skid_steer_wheel_speeds",
+    "steer_kernel_args",
     "wheel_geometry_for",
     "wheel_servo_gains",
 ]
@@ -403,6 +405,31 @@ def explicit_steer_commands(
     c, s = np.cos(delta), np.sin(delta)
     omega = (vpx * c + vpy * s - wz[..., None] * g.steering_offset) / g.wheel_radius
     return SteerCommands(delta=delta, omega=omega, saturated=over, needed_delta=needed)
+
+
+def steer_kernel_args(geometry: WheelGeometry) -> tuple:
+    """The wheel arrays :func:`explicit_steer_one` takes (compute once per rover): steering
+    axis x and y (m), effective steering limit (rad), steering offset (m), wheel radius
+    (m), (n,) each."""
+    g = geometry
+    return (
+        np.ascontiguousarray(g.p_BS[:, 0]), np.ascontiguousarray(g.p_BS[:, 1]),
+        np.ascontiguousarray(g.effective_limit), np.ascontiguousarray(g.steering_offset),
+        np.ascontiguousarray(g.wheel_radius),
+    )  # fmt: skip
+
+
+def explicit_steer_one(vx: float, vy: float, wz: float, previous_delta, args, *,
+                       tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """``explicit_steer_commands((vx, vy, wz), previous_delta=..., clip=True)``'s
+    ``(delta, omega)`` (rad, rad/s; (n,) each) in one compiled call, ``args`` from
+    :func:`steer_kernel_args` (the flight software's 50 Hz call)."""
+    prev = np.ascontiguousarray(previous_delta, dtype=np.float64)
+    px, py, lim, offset, radius = args
+    delta, omega, _, _ = _steer_one(
+        float(vx), float(vy), float(wz), px, py, prev, lim, offset, radius, float(tol)
+    )
+    return delta, omega
 
 
 @numba.njit(cache=True)

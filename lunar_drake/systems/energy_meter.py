@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from lunar_drake.power.actuator_energy import energy_step
+
 
 class EnergyMeter(LeafSystem):
     """Integrates actuator power over time.
@@ -72,8 +74,11 @@ class EnergyMeter(LeafSystem):
         self.group_outputs = {names[k]: port(k) for k in range(1, self._n_groups)}
 
     def _update(self, context, discrete_state):
-        tau = self.actuation_input.Eval(context)[self._ia]
-        v = self.state_input.Eval(context)[self._iv]
-        e = context.get_discrete_state(self._energy).get_value()
-        p = np.bincount(self._group, weights=np.maximum(tau * v, 0.0), minlength=self._n_groups)
-        discrete_state.get_mutable_vector(self._energy).set_value(e + p * self._dt)
+        discrete_state.get_mutable_vector(self._energy).set_value(
+            energy_step(
+                context.get_discrete_state(self._energy).get_value(),
+                self.actuation_input.Eval(context),
+                self.state_input.Eval(context),
+                self._ia, self._iv, self._group, self._dt,
+            )
+        )  # fmt: skip

@@ -6,8 +6,9 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from lunar_drake.dynamics.kinematics import (
-    explicit_steer_commands,
+    explicit_steer_one,
     skid_steer_wheel_speeds,
+    steer_kernel_args,
     wheel_geometry_for,
 )
 
@@ -41,6 +42,7 @@ class RoverKinematics(LeafSystem):
         super().__init__()
         self._geometry = wheel_geometry_for(description)
         self._skid = description.steering == "skid"
+        self._steer_args = steer_kernel_args(self._geometry)
         self.twist_input = self.DeclareVectorInputPort("twist_command", 3)
         # State: [wheel speeds (4), steering angles (4)].
         self._state = self.DeclareDiscreteState(2 * N_WHEELS)
@@ -71,9 +73,9 @@ class RoverKinematics(LeafSystem):
                 np.array([twist[0], 0.0, twist[2]]), geometry=self._geometry
             )
         else:
-            cmd = explicit_steer_commands(
-                twist, geometry=self._geometry, previous_delta=x[N_WHEELS:], clip=True
+            delta, omega = explicit_steer_one(
+                twist[0], twist[1], twist[2], x[N_WHEELS:], self._steer_args
             )
-            x[:N_WHEELS] = cmd.omega
-            x[N_WHEELS:] = cmd.delta
+            x[:N_WHEELS] = omega
+            x[N_WHEELS:] = delta
         discrete_state.get_mutable_vector(self._state).SetFromVector(x)

@@ -90,10 +90,10 @@ class StateEstimator(LeafSystem):
         xd = {self.xd_ticket()}
 
         def pose(c, o):
-            o.SetFromVector(ekf.pose_and_covariance(*self._filter(c))[0])
+            o.SetFromVector(core.pose(self._s(c)))
 
         def cov(c, o):
-            o.SetFromVector(ekf.pose_and_covariance(*self._filter(c))[1].ravel())
+            o.SetFromVector(core.pose_covariance(self._s(c)))
 
         self.pose_estimate_output = self.DeclareVectorOutputPort(
             "pose_estimate", BasicVector(6), pose, prerequisites_of_calc=xd
@@ -112,10 +112,6 @@ class StateEstimator(LeafSystem):
 
     def _s(self, context) -> np.ndarray:
         return context.get_discrete_state(self._state).get_value()
-
-    def _filter(self, context):
-        s = self._s(context)
-        return s[_X].copy(), s[_PC].reshape(ekf.N_ERR, ekf.N_ERR).copy()
 
     def _update(self, context, discrete_state):
         s = self._s(context)

@@ -46,6 +46,7 @@ class _Kinematics(NamedTuple):
 
     values: np.ndarray  # contact_kernels.pack_stage1's blocks (wheel_state: drawbar pull 0)
     on: np.ndarray  # (n,) wheel on the raster
+    const: np.ndarray  # the soil's kernel constants (contact_kernels.soil_constants)
     belly: tuple | None  # (force, moment about the chassis origin), world
     off: bool  # any wheel or belly point off the raster
 
@@ -288,7 +289,7 @@ class WheelRegolithContact(LeafSystem):
         belly = None
         if len(pen) and pen.max() > 0:
             belly = self._belly_contact(hf, X, V, p_pts, pen, flags[n:])
-        return _Kinematics(values, on, belly, off)
+        return _Kinematics(values, on, const, belly, off)
 
     def _kinematics_file_backed(self, hf, X, V, par, const, belly_B) -> _Kinematics:
         """Stage 1 on a file-backed raster (no compiled height lookups)."""
@@ -322,7 +323,7 @@ class WheelRegolithContact(LeafSystem):
             p, axle, g.n_W, g.forward_W, g.lateral_W, g.p_WC - p, state, N, slip_velocity,
             omega_r, length, ws, fx, fy, m_soil, np.asarray(pen, float),
         )  # fmt: skip
-        return _Kinematics(values, on, belly, off)
+        return _Kinematics(values, on, const, belly, off)
 
     def _belly_contact(self, hf, X, V, p_pts, pen, ok, *, n_t=None):
         """(force, moment about the chassis origin) in W of the penalty contact at the
@@ -363,8 +364,7 @@ class WheelRegolithContact(LeafSystem):
     def _compute(self, context) -> _Contact:
         k = self._kinematics.Eval(context)
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
-        const = self._constants(self.get_soil(context))[1]
-        F6, state = ck.step_forces(k.values, self._n, k.on, j, const)
+        F6, state = ck.step_forces(k.values, self._n, k.on, j, k.const)
         return _Contact(F6, state, k.belly, k.off)
 
     def _cached(self, context) -> _Contact:
@@ -373,8 +373,7 @@ class WheelRegolithContact(LeafSystem):
     def _update_patch(self, context, discrete_state):
         k = self._kinematics.Eval(context)
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
-        jn = ck.step_patch(k.values, self._n, j, self._dt,
-                           self._constants(self.get_soil(context))[1],
+        jn = ck.step_patch(k.values, self._n, j, self._dt, k.const,
                            self._patch.saturation_moduli)  # fmt: skip
         discrete_state.get_mutable_vector(self._patch_index).SetFromVector(jn.ravel())
 
