@@ -210,10 +210,11 @@ def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radi
     :func:`kinematics` and the belly points' heights (the same bits).
 
     Returns:
-        (values, flags, p_belly): ``values`` :func:`pack_stage1`'s (``33 n`` values, then
-        the belly points' penetration (k,), m; -inf off the raster); ``flags`` (n + k,)
-        bool: each wheel's footprint on the raster, then each belly point's; the belly
-        points (k, 3) in W.
+        (values, flags, p_belly, off, touch): ``values`` :func:`pack_stage1`'s (``33 n``
+        values, then the belly points' penetration (k,), m; -inf off the raster);
+        ``flags`` (n + k,) bool: each wheel's footprint on the raster, then each belly
+        point's; the belly points (k, 3) in W; ``off``: a flag is False; ``touch``: a
+        belly point is below the ground.
     """
     k = belly_B.shape[0]
     p_belly = points_in_world(X[n], belly_B) if k > 0 else np.zeros((0, 3))
@@ -240,7 +241,13 @@ def step_kinematics(X, V, n, z, res, left, right, bottom, top, U, Wc, pinv, radi
     flags = np.empty(n + k, np.bool_)
     flags[:n] = on
     flags[n:] = ok
-    return out, flags, p_belly
+    off_any = False
+    for i in range(n + k):
+        off_any = off_any or not flags[i]
+    touch = False
+    for i in range(k):
+        touch = touch or pen[i] > 0.0
+    return out, flags, p_belly, off_any, touch
 
 
 @numba.njit(cache=True)

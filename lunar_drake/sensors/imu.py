@@ -10,6 +10,7 @@ noise (gyro x, y, z, accel x, y, z) and 6 bias random-walk steps applied after i
 import dataclasses as dc
 import math
 
+import numba
 import numpy as np
 
 from lunar_drake.errors import check_range
@@ -146,6 +147,21 @@ def imu_measurement(
 
     Draws 12 normals from ``generator``: white noise first, then the bias step.
     """
-    z = generator.standard_normal(12)
-    meas = np.asarray(ideal, dtype=np.float64) + bias + z[:6] * config.white_sigma
-    return meas, bias + z[6:] * config.bias_step_sigma
+    ideal = np.asarray(ideal, dtype=np.float64)
+    return noisy_reading(ideal[:3], ideal[3:], np.asarray(bias, dtype=np.float64),
+                         generator.standard_normal(12), config.white_sigma,
+                         config.bias_step_sigma)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def noisy_reading(gyro, accel, bias, z, white_sigma, bias_step_sigma):  # pragma: no cover
+    """``(ideal + bias + z[:6] white_sigma, bias + z[6:] bias_step_sigma)``, (6,) each:
+    the ideal reading ``(gyro, accel)`` (3,) each, the bias (6,) and 12 standard normals
+    ``z`` (white noise first, then the bias step); sigmas (6,) per sample."""
+    meas = np.empty(6)
+    next_bias = np.empty(6)
+    for i in range(6):
+        ideal = gyro[i] if i < 3 else accel[i - 3]
+        meas[i] = (ideal + bias[i]) + z[i] * white_sigma[i]
+        next_bias[i] = bias[i] + z[6 + i] * bias_step_sigma[i]
+    return meas, next_bias

@@ -9,7 +9,7 @@ from pydrake.systems.framework import BasicVector
 from pydrake.systems.sensors import Accelerometer, Gyroscope
 
 from lunar_drake.rng import generator
-from lunar_drake.sensors.imu import ImuConfig, imu_initial_bias, imu_measurement
+from lunar_drake.sensors.imu import ImuConfig, imu_initial_bias, noisy_reading
 from lunar_drake.systems.sampled_sensor import SampledSensor
 
 
@@ -58,6 +58,7 @@ class Imu(SampledSensor):
         self.specific_force_input = self.DeclareVectorInputPort("specific_force", 3)
         bias0 = imu_initial_bias(generator(seed, f"{name}/initial_bias"), config=self._config)
         self._bias = self.DeclareDiscreteState(BasicVector(bias0))
+        self._sigmas = (self._config.white_sigma, self._config.bias_step_sigma)
         self.bias_truth_output = self.DeclareStateOutputPort("bias_truth", self._bias)
 
     @property
@@ -66,11 +67,12 @@ class Imu(SampledSensor):
         return self._config
 
     def sample(self, context, generator, discrete_state):
-        ideal = np.concatenate(
-            [self.angular_velocity_input.Eval(context), self.specific_force_input.Eval(context)]
-        )
-        bias = context.get_discrete_state(self._bias).get_value()
-        meas, next_bias = imu_measurement(ideal, bias, generator, config=self._config)
+        # imu_measurement's draws and arithmetic, with the sigmas computed once
+        meas, next_bias = noisy_reading(
+            self.angular_velocity_input.Eval(context), self.specific_force_input.Eval(context),
+            context.get_discrete_state(self._bias).get_value(), generator.standard_normal(12),
+            *self._sigmas,
+        )  # fmt: skip
         discrete_state.set_value(self._bias, next_bias)
         return meas
 

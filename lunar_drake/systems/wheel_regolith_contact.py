@@ -177,6 +177,11 @@ class WheelRegolithContact(LeafSystem):
         self._n = n
         self._bodies = self._wheels + ([] if self._belly is None else [self._belly])
         self._memo = None  # (soil, kernel parameters) of the last soil seen
+        # (heightfield, its kernel arguments, the footprint pattern) of the last raster seen
+        self._raster_memo = None
+        self._radius = float(wheel.radius_m)
+        self._X = np.empty((len(self._bodies), 3, 4))  # scratch of _compute_kinematics
+        self._V = np.empty((len(self._bodies), 6))
         self._soil_index = self.DeclareAbstractParameter(AbstractValue.Make(soil))
         self._patch_index = self.DeclareDiscreteState(2 * n)
         self.DeclarePeriodicDiscreteUpdateEvent(
@@ -271,25 +276,30 @@ class WheelRegolithContact(LeafSystem):
         hf = self.heightfield_input.Eval(context)
         par, const = self._constants(self.get_soil(context))
         n = self._n
-        # the wheels' and the chassis' poses and velocities, one array each
-        X = np.array([poses[i].GetAsMatrix34() for i in self._bodies])  # (n [+1], 3, 4)
-        V = np.array([vels[i].get_coeffs() for i in self._bodies])  # (n [+1], 6): [w, v]
+        # the wheels' and the chassis' poses and velocities, one array each (scratch:
+        # the kernel copies what the cache value keeps)
+        X, V = self._X, self._V  # (n [+1], 3, 4), (n [+1], 6): [w, v]
+        for k, i in enumerate(self._bodies):
+            X[k] = poses[i].GetAsMatrix34()
+            V[k] = vels[i].get_coeffs()
         belly_B = self._belly_pts if self._belly is not None else np.zeros((0, 3))
-        raster = hf.within_kernel_args(margin_m=hf.resolution_m)
+        memo = self._raster_memo
+        if memo is None or memo[0] is not hf:
+            w = self._wheel
+            memo = self._raster_memo = (
+                hf, hf.within_kernel_args(margin_m=hf.resolution_m),
+                footprint_pattern(self._sampling, w.radius_m, w.width_m),
+            )  # fmt: skip
+        raster = memo[1]
         if raster is None:  # a file-backed raster: the functions one by one
-            return self._kinematics_file_backed(hf, X, V, par, const, belly_B)
-        w = self._wheel
-        U, Wc, pinv = footprint_pattern(self._sampling, w.radius_m, w.width_m)
-        values, flags, p_pts = ck.step_kinematics(
-            X, V, n, *raster, U, Wc, pinv, float(w.radius_m), par, const, belly_B
+            return self._kinematics_file_backed(hf, X.copy(), V.copy(), par, const, belly_B)
+        values, flags, p_pts, off, touch = ck.step_kinematics(
+            X, V, n, *raster, *memo[2], self._radius, par, const, belly_B
         )
-        on = flags[:n]
-        off = not flags.all()
-        pen = values[33 * n :]
         belly = None
-        if len(pen) and pen.max() > 0:
-            belly = self._belly_contact(hf, X, V, p_pts, pen, flags[n:])
-        return _Kinematics(values, on, const, belly, off)
+        if touch:
+            belly = self._belly_contact(hf, X, V, p_pts, values[33 * n :], flags[n:])
+        return _Kinematics(values, flags[:n], const, belly, off)
 
     def _kinematics_file_backed(self, hf, X, V, par, const, belly_B) -> _Kinematics:
         """Stage 1 on a file-backed raster (no compiled height lookups)."""
