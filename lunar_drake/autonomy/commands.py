@@ -22,6 +22,7 @@ Every mode change is recorded (:class:`Transition`) and counted in telemetry.
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import math
 
 import numpy as np
@@ -68,6 +69,14 @@ class GotoCommand:
     tolerance_m: float = 0.5
     timeout_s: float = 600.0
     sun_azimuth_rad: float | None = None
+
+    @functools.cached_property
+    def waypoints_array(self) -> np.ndarray:
+        """``waypoints`` as a read-only (n, 2) float array (m), built once: the executor
+        follows it every tick."""
+        wp = np.array(self.waypoints, dtype=float).reshape(-1, 2)
+        wp.setflags(write=False)
+        return wp
 
     def size_bytes(self) -> int:
         """Encoded size: a 4-byte header, three float64, two float64 a waypoint and a
@@ -266,7 +275,7 @@ def executor_step(
             if pose is None:
                 raise ValueError("a GotoCommand needs the pose estimate")
             twist, index, done = follow_step(
-                pose, active.waypoints, index, speed_mps=active.speed_mps,
+                pose, active.waypoints_array, index, speed_mps=active.speed_mps,
                 tolerance_m=active.tolerance_m, params=follower or FollowerParams(),
                 sun_azimuth_rad=active.sun_azimuth_rad,
             )  # fmt: skip
