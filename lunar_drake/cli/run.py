@@ -11,10 +11,10 @@ from lunar_drake.errors import ConfigError, check_range
 
 #: Simulated seconds per wall second on a 2-core machine (low, high), with the stereo
 #: cameras and without: the range of `benchmarks/mission_rate.py` and whole default
-#: missions measured here (2026-11-28: whole default runs 2.3-2.5x alone, without
-#: cameras 4.9x; the low ends for a machine shared with another job). Only for the
+#: missions measured here (2026-11-29: whole default runs 4.2-4.9x alone, without
+#: cameras 9.8x; the low ends for a machine shared with another job). Only for the
 #: estimate printed before a run.
-REALTIME_FACTOR = {"cameras": (1.5, 2.5), "no_cameras": (4.0, 6.0)}
+REALTIME_FACTOR = {"cameras": (2.5, 4.5), "no_cameras": (5.0, 9.0)}
 #: Bytes per pixel of one camera's saved frame (16-bit raw PNG + 8-bit preview PNG of
 #: the noisy 12-bit codes): 1.5-1.9 measured on default-site frames at 640 x 480.
 FRAME_BYTES_PER_PX = 1.7
