@@ -16,6 +16,7 @@ from lunar_drake.autonomy.odometry import body_displacement
 from lunar_drake.dynamics.kinematics import (
     explicit_steer_commands,
     explicit_steer_one,
+    skid_twist_map,
     steer_kernel_args,
     wheel_geometry_for,
 )
@@ -47,7 +48,7 @@ def test_the_estimator_tick_is_the_displacement_and_predict_it_fuses(preset):
     skid = desc.steering == "skid"
     config = ekf.EstimatorConfig(slip_vs_slope=[[-10.0, 0.2], [0.0, 0.1], [10.0, 0.3]])
     params = ekf.kernel_params(config)
-    pinv = core.skid_pinv(g) if skid else np.zeros((2, 4))
+    pinv = skid_twist_map(g) if skid else np.zeros((2, 4))
     rng = np.random.default_rng(3)
     for _ in range(30):
         s, angles = _state(rng, config)
@@ -151,3 +152,4 @@ def test_the_energy_step_is_the_grouped_positive_power():
          for k in range(3)]
     )  # fmt: skip
     np.testing.assert_allclose(energy_step(e0, tau, state, ia, iv, group, 0.01), ref, rtol=1e-15)
+

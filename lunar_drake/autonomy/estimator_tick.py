@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from lunar_drake.autonomy import ekf_kernels as _k
-from lunar_drake.dynamics.kinematics import WheelGeometry, _explicit_steer_twist_1, _skid_sides
+from lunar_drake.dynamics.kinematics import _explicit_steer_twist_1
 
 _PC0 = _k.NX
 _FIX0 = _PC0 + _k.N_ERR**2
@@ -33,14 +33,6 @@ def layout(n_wheels: int) -> tuple[slice, int, int]:
     with ``n_wheels`` wheels."""
     angles = slice(_ANGLES0, _ANGLES0 + int(n_wheels))
     return angles, angles.stop, angles.stop + 1
-
-
-def skid_pinv(geometry: WheelGeometry) -> np.ndarray:
-    """(2, n) least-squares map from skid-steer rim speeds (m/s) to (vx, wz), as
-    :func:`~lunar_drake.dynamics.kinematics.skid_steer_twist` (``icr_scale`` 1)."""
-    n = geometry.n_wheels
-    a = np.stack([np.ones(n), -_skid_sides(geometry)], axis=1)
-    return np.ascontiguousarray(np.linalg.pinv(a))
 
 
 @numba.njit(cache=True)
@@ -62,7 +54,8 @@ def fix_is_new(s, fix):  # pragma: no cover - numba
 def tick(s, angles, fix, imu, steer, dt, skid, pinv, p_BS, offset, radius, table_deg,
          table_slip, noise):  # pragma: no cover - numba  # fmt: skip
     """The state after one tick (a new array): once started, the chassis displacement
-    from the wheel-angle increments (skid: ``pinv`` of :func:`skid_pinv`; explicit
+    from the wheel-angle increments (skid: ``pinv`` of
+    :func:`~lunar_drake.dynamics.kinematics.skid_twist_map`; explicit
     steer: the steering angles ``steer`` (n,) rad and the wheel geometry ``p_BS``,
     ``offset``, ``radius``) and the EKF prediction with the IMU reading ``imu`` (6,)
     (its gyro rate, rad/s) over ``dt`` s (:func:`~lunar_drake.autonomy.ekf_kernels.predict`'s

@@ -83,6 +83,7 @@ __all__ = [
     "explicit_steer_twist",
     "skid_steer_twist",
     "skid_steer_wheel_speeds",
+    "skid_twist_map",
     "steer_kernel_args",
     "wheel_geometry_for",
     "wheel_servo_gains",
@@ -276,17 +277,23 @@ def skid_steer_twist(omega, *, geometry: WheelGeometry, icr_scale: float = 1.0) 
     Least squares over the wheels of ``r_i omega_i = vx - wz * icr_scale * y_side(i)``;
     exact inverse of :func:`skid_steer_wheel_speeds`.
     """
-    if not icr_scale > 0:
-        raise OutOfRangeError(f"icr_scale = {icr_scale!r}; must be > 0")
     w = np.asarray(omega, dtype=np.float64)
     n = geometry.n_wheels
     if w.ndim == 0 or w.shape[-1] != n:
         raise ConfigError(f"omega has shape {w.shape}; must be (..., {n})")
-    y_side = _skid_sides(geometry)
-    a = np.stack([np.ones(n), -icr_scale * y_side], axis=1)  # (n, 2)
     v_wheel = w * geometry.wheel_radius
-    sol = v_wheel @ np.linalg.pinv(a).T  # (..., 2)
+    sol = v_wheel @ skid_twist_map(geometry, icr_scale=icr_scale).T  # (..., 2)
     return np.stack([sol[..., 0], np.zeros_like(sol[..., 0]), sol[..., 1]], axis=-1)
+
+
+def skid_twist_map(geometry: WheelGeometry, *, icr_scale: float = 1.0) -> np.ndarray:
+    """(2, n) least-squares map from skid-steer rim speeds ``r_i omega_i`` (m/s) to
+    (vx (m/s), wz (rad/s)): the pseudo-inverse of :func:`skid_steer_twist`'s equations."""
+    if not icr_scale > 0:
+        raise OutOfRangeError(f"icr_scale = {icr_scale!r}; must be > 0")
+    n = geometry.n_wheels
+    a = np.stack([np.ones(n), -icr_scale * _skid_sides(geometry)], axis=1)  # (n, 2)
+    return np.ascontiguousarray(np.linalg.pinv(a))
 
 
 # ------------------------------------------------------------------------- explicit steer

@@ -10,7 +10,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from lunar_drake.autonomy import ekf
 from lunar_drake.autonomy import estimator_tick as core
-from lunar_drake.dynamics.kinematics import wheel_geometry_for
+from lunar_drake.dynamics.kinematics import skid_twist_map, wheel_geometry_for
 from lunar_drake.moon import GRAVITY_MPS2
 
 N_WHEELS = 4
@@ -66,7 +66,7 @@ class StateEstimator(LeafSystem):
         g = self._geometry
         # the compiled tick's arguments that do not change (core.tick)
         self._tick_args = (
-            self._dt, self._skid, core.skid_pinv(g) if self._skid else np.zeros((2, N_WHEELS)),
+            self._dt, self._skid, skid_twist_map(g) if self._skid else np.zeros((2, N_WHEELS)),
             g.p_BS, g.steering_offset, g.wheel_radius, *self._params,
         )  # fmt: skip
         self._no_steer = np.zeros(N_WHEELS)
