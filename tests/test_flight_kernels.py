@@ -153,3 +153,10 @@ def test_the_energy_step_is_the_grouped_positive_power():
     )  # fmt: skip
     np.testing.assert_allclose(energy_step(e0, tau, state, ia, iv, group, 0.01), ref, rtol=1e-15)
 
+
+def test_aim_point_refuses_a_path_that_is_not_a_list_of_points():
+    from lunar_drake.errors import ConfigError
+
+    for bad in ([1.0, 2.0, 3.0], np.zeros((0, 2)), np.zeros((3, 3))):
+        with pytest.raises(ConfigError, match="waypoints have shape"):
+            aim_point((0.0, 0.0), bad, 0, 1.0)

@@ -114,6 +114,8 @@ def aim_point(xy, waypoints, index: int, lookahead_m: float) -> tuple[np.ndarray
     ``xy`` (the last waypoint if none)."""
     p = np.asarray(xy, dtype=float)
     wp = np.ascontiguousarray(waypoints, dtype=float)
+    if wp.ndim != 2 or wp.shape[0] < 1 or wp.shape[1] != 2:
+        raise ConfigError(f"waypoints have shape {wp.shape}; a path of (n >= 1, 2) is required")
     ax, ay, k = _aim_point(float(p[0]), float(p[1]), wp, int(index), float(lookahead_m))
     return np.array([ax, ay]), k
 
