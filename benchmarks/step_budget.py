@@ -201,12 +201,14 @@ def trivial_call_cost(*, systems: int = 10, sim_s: float = 20.0, step_s: float =
     inside it, as a method in the table is), and ``dispatch_s``, the rest of the run's
     time."""
     from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+    from pydrake.systems.framework import DiagramBuilder
+
+    from lunar_drake.systems.leaf import Leaf
 
     body = [0.0, 0]
     clock = time.perf_counter
 
-    class Trivial(LeafSystem):
+    class Trivial(Leaf):  # the base of our systems (no per-step witness lookup)
         def __init__(self):
             super().__init__()
             self.u = self.DeclareVectorInputPort("u", 10)

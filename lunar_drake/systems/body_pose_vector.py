@@ -6,10 +6,12 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.math import SpatialVelocity
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
+
+from lunar_drake.systems.leaf import Leaf
 
 
-class BodyPoseVector(LeafSystem):
+class BodyPoseVector(Leaf):
     """Ground truth of one body as a vector.
 
     .. pydrake_system::

@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy.commands import MODES, SAFE_REASONS, ExecutorState, executor_step
+from lunar_drake.systems.leaf import Leaf
 
 #: Columns of the executor's ``status`` output (and of flight_status.csv).
 STATUS_FIELDS = ("mode", "command_seq", "safe_reason", "mode_changes", "motion_seq")
 
 
-class CommandExecutor(LeafSystem):
+class CommandExecutor(Leaf):
     """The on-board command executor and mode manager
     (:func:`~lunar_drake.autonomy.commands.executor_step`).
 

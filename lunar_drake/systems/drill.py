@@ -7,16 +7,17 @@ import math
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy.commands import MODES, DrillCommand
 from lunar_drake.rng import SampleStream, stream_key
 from lunar_drake.science.drill import DrillConfig, ice_at_depth, read_sample
 from lunar_drake.science.nirvss import NIRVSSConfig, SurfaceMap, spot_means
 from lunar_drake.systems.command_executor import STATUS_FIELDS
+from lunar_drake.systems.leaf import Leaf
 
 
-class DrillController(LeafSystem):
+class DrillController(Leaf):
     """Flight: passes the newest :class:`~lunar_drake.autonomy.commands.DrillCommand`
     of the uplink to the drill while the rover is not driving.
 
@@ -62,7 +63,7 @@ class DrillController(LeafSystem):
             state.get_mutable_abstract_state(self._state).set_value((new_last, current))
 
 
-class Drill(LeafSystem):
+class Drill(Leaf):
     """Plant: the drill and NIRVSS's reading of what it brings up (a sensor).
 
     .. pydrake_system::

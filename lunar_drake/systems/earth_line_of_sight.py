@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
+from pydrake.systems.framework import BasicVector, EventStatus
 
 from lunar_drake.comms.line_of_sight import earth_margin_deg
+from lunar_drake.systems.leaf import Leaf
 
 
-class EarthLineOfSight(LeafSystem):
+class EarthLineOfSight(Leaf):
     """The Earth's elevation above the terrain horizon at the rover's antenna.
 
     .. pydrake_system::

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.power.actuator_energy import energy_step
+from lunar_drake.systems.leaf import Leaf
 
 
-class EnergyMeter(LeafSystem):
+class EnergyMeter(Leaf):
     """Integrates actuator power over time.
 
     .. pydrake_system::

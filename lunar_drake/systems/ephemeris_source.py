@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
+from pydrake.systems.framework import BasicVector, EventStatus
 
 from lunar_drake.ephemeris.kernels import ensure_kernels
 from lunar_drake.ephemeris.sun_earth import (
@@ -16,6 +16,7 @@ from lunar_drake.ephemeris.sun_earth import (
     utc_to_tdb_s,
 )
 from lunar_drake.errors import ConfigError, OutOfRangeError
+from lunar_drake.systems.leaf import Leaf
 
 # Discrete state layout.
 _SUN_DIR = slice(0, 3)
@@ -28,7 +29,7 @@ _P_LAT, _P_LON, _P_HEIGHT, _P_EPOCH = range(4)
 WORLD_FRAMES = ("enu", "polar_grid")
 
 
-class EphemerisSource(LeafSystem):
+class EphemerisSource(Leaf):
     """Sun and Earth directions, distances and Earth's phase at the site (paper section 5).
 
     .. pydrake_system::

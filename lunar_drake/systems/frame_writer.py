@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.files import atomic_path
+from lunar_drake.systems.leaf import Leaf
 
 
 def write_png(path: Path, array: np.ndarray) -> None:
@@ -20,7 +21,7 @@ def write_png(path: Path, array: np.ndarray) -> None:
             raise OSError(f"could not encode image {str(path)!r}")
 
 
-class FrameWriter(LeafSystem):
+class FrameWriter(Leaf):
     """Writes each new frame of the named cameras: ``<name>_<index>.png`` (16-bit PNG of
     the raw 12-bit codes) and ``<name>_<index>_preview.png`` (8-bit).
 

@@ -6,10 +6,11 @@ import dataclasses as dc
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.errors import check_range
 from lunar_drake.rotations import rotation_matrix_from_quaternion
+from lunar_drake.systems.leaf import Leaf
 
 
 @dc.dataclass
@@ -48,7 +49,7 @@ def gimbal_centre_C(description) -> np.ndarray:
     return np.array([d.mast_x_m, 0.0, d.chassis_height_m / 2 + d.mast_height_m])
 
 
-class GimbalPointing(LeafSystem):
+class GimbalPointing(Leaf):
     """Points the mast gimbal, from the rover's own estimate and commands, never truth.
 
     .. pydrake_system::

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy.operations import (
     TOPIC,
@@ -21,9 +21,10 @@ from lunar_drake.autonomy.operations import (
 )
 from lunar_drake.autonomy.planner import path_blocked
 from lunar_drake.errors import OutOfBoundsError, OutOfRangeError
+from lunar_drake.systems.leaf import Leaf
 
 
-class GroundOperator(LeafSystem):
+class GroundOperator(Leaf):
     """The ground's operations software.
 
     .. pydrake_system::

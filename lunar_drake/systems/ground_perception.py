@@ -8,7 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.comms.images import decode_frame
 from lunar_drake.perception.ground_pipeline import (
@@ -17,6 +17,7 @@ from lunar_drake.perception.ground_pipeline import (
     perception_step,
     planar_correction,
 )
+from lunar_drake.systems.leaf import Leaf
 
 
 def camera_in_chassis_fn(description):
@@ -60,7 +61,7 @@ class _Batch:
         return self
 
 
-class GroundPerception(LeafSystem):
+class GroundPerception(Leaf):
     """The ground's stereo, VO and mapping.
 
     .. pydrake_system::

@@ -11,7 +11,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import QueryObject, Role
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 from pydrake.systems.sensors import ImageDepth32F, ImageGrey8U, ImageLabel16I
 
 from lunar_drake import rng
@@ -22,6 +22,7 @@ from lunar_drake.render.raycast import DynamicMesh
 from lunar_drake.render.row_queue import workers
 from lunar_drake.render.shapes import shape_mesh
 from lunar_drake.sensors.sampling import delivered_index, samples_in_flight
+from lunar_drake.systems.leaf import Leaf
 
 
 @dc.dataclass(frozen=True)
@@ -124,7 +125,7 @@ def rover_meshes(plant, scene_graph, model_instance, *, albedo: float = 0.5, exc
     return out
 
 
-class HapkeCamera(LeafSystem):
+class HapkeCamera(Leaf):
     """Renders every mounted camera at ``rate_hz`` (periodic unrestricted update from
     t = 0) and holds the frames in its state, so outputs are cheap and deterministic.
     Frame k (taken at t_k = k / rate_hz) is delivered at t_k + ``delay_s``: the outputs

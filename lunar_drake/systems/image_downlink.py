@@ -7,16 +7,16 @@ import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.comms.images import ImageDownlinkConfig, StereoFrame, encode_frames
 from lunar_drake.comms.messages import Message
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.systems.receiver import TopicReceiver
 
 TOPIC = "images"
 
 
-class ImagePacketizer(LeafSystem):
+class ImagePacketizer(Leaf):
     """Flight: compresses each selected stereo frame into an ``images`` message.
 
     .. pydrake_system::

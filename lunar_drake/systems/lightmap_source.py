@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.render.shading import RasterSampler
+from lunar_drake.systems.leaf import Leaf
 
 
 def sun_grid_az_el(*, site, epoch_utc: str, times_s, extra_kernels=()):
@@ -27,7 +27,7 @@ def sun_grid_az_el(*, site, epoch_utc: str, times_s, extra_kernels=()):
     return az, el
 
 
-class LightmapSource(LeafSystem):
+class LightmapSource(Leaf):
     """Outputs the terrain's lit fraction at the current time as a callable raster.
 
     .. pydrake_system::

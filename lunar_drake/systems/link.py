@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.comms import link as core
 from lunar_drake.comms.link import LinkConfig
+from lunar_drake.systems.leaf import Leaf
 
 #: Offset (s) of the link's polls after its producers' updates, so a message created at
 #: t is taken at t + POLL_OFFSET_S (and delivered, from its own creation time, at
@@ -14,7 +14,7 @@ from lunar_drake.comms.link import LinkConfig
 POLL_OFFSET_S = 1.0e-6
 
 
-class Link(LeafSystem):
+class Link(Leaf):
     """Carries messages of named topics from producers to consumers.
 
     .. pydrake_system::

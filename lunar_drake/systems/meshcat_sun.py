@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import EventStatus, LeafSystem
+from pydrake.systems.framework import EventStatus
+
+from lunar_drake.systems.leaf import Leaf
 
 
-class MeshcatSun(LeafSystem):
+class MeshcatSun(Leaf):
     """Points Meshcat's directional light along the Sun direction (site frame) and dims
     it when the Sun is below the horizon; publishes at ``period_s`` and at init.
 

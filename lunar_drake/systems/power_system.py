@@ -12,13 +12,14 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import AbstractParameterIndex, EventStatus, LeafSystem
+from pydrake.systems.framework import AbstractParameterIndex, EventStatus
 
 from lunar_drake.power.battery import battery_step
 from lunar_drake.power.config import PowerConfig
 from lunar_drake.power.loads import mean_load_breakdown
 from lunar_drake.power.solar_array import PanelMount, array_output
 from lunar_drake.render.horizon import HorizonMask
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
 __all__ = ["MEASUREMENT_FIELDS", "TRUTH_FIELDS", "PowerSystem"]
@@ -33,7 +34,7 @@ _SOC, _INCIDENCE, _FRACTION, _ARRAY, _LOAD, _DRIVE_J, _STEER_J, _BRAKED = range(
 _STATE_SIZE = 8
 
 
-class PowerSystem(LeafSystem):
+class PowerSystem(Leaf):
     """The rover's electrical power: solar array, battery, loads (issue 30).
 
     .. pydrake_system::

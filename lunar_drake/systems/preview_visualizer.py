@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import Rgba
-from pydrake.systems.framework import EventStatus, LeafSystem
+from pydrake.systems.framework import EventStatus
+
+from lunar_drake.systems.leaf import Leaf
 
 
-class PreviewVisualizer(LeafSystem):
+class PreviewVisualizer(Leaf):
     """Draws the predicted path of the newest goto the ground sent (the operator's
     ``preview`` output: (seq, (N, 4) rows of t, x, y, z)) as a line ``lift_m`` above the
     ground's map at ``path``, every ``period_s``, beside the live rover.

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.comms.messages import Ledger
+from lunar_drake.systems.leaf import Leaf
 
 
-class TopicReceiver(LeafSystem):
+class TopicReceiver(Leaf):
     """Ground: takes in the messages of one topic the downlink delivered, once each.
 
     .. pydrake_system::

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.dynamics.kinematics import (
     explicit_steer_one,
@@ -11,11 +11,12 @@ from lunar_drake.dynamics.kinematics import (
     steer_kernel_args,
     wheel_geometry_for,
 )
+from lunar_drake.systems.leaf import Leaf
 
 N_WHEELS = 4
 
 
-class RoverKinematics(LeafSystem):
+class RoverKinematics(Leaf):
     """Turns the chassis twist command into wheel-speed and steering-angle set-points.
 
     .. pydrake_system::

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.rng import SampleStream, stream_key
 from lunar_drake.sensors.sampling import (
@@ -12,9 +12,10 @@ from lunar_drake.sensors.sampling import (
     sample_index,
     samples_in_flight,
 )
+from lunar_drake.systems.leaf import Leaf
 
 
-class SampledSensor(LeafSystem):
+class SampledSensor(Leaf):
     """Base class of the plant's vector sensors.
 
     Sample k is taken at t_k = k / rate_hz (k = 0, 1, ...) by :meth:`sample`, from the

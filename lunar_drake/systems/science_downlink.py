@@ -7,11 +7,11 @@ import dataclasses as dc
 import math
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.comms.messages import Message
 from lunar_drake.comms.science import TOPIC, ScienceRecord
 from lunar_drake.sensors.sampling import delivered_index
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.systems.receiver import TopicReceiver
 
 #: How often the packetizer looks for new instrument samples (s).
@@ -31,7 +31,7 @@ class Instrument:
     delay_s: float
 
 
-class SciencePacketizer(LeafSystem):
+class SciencePacketizer(Leaf):
     """Flight: one ``science`` message per new instrument sample.
 
     .. pydrake_system::

@@ -6,19 +6,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy import ekf
 from lunar_drake.autonomy import estimator_tick as core
 from lunar_drake.dynamics.kinematics import skid_twist_map, wheel_geometry_for
 from lunar_drake.moon import GRAVITY_MPS2
+from lunar_drake.systems.leaf import Leaf
 
 N_WHEELS = 4
 _X, _PC = core.X, core.PC
 _ANGLES, _STARTED, _SIZE = core.layout(N_WHEELS)
 
 
-class StateEstimator(LeafSystem):
+class StateEstimator(Leaf):
     """The on-board pose estimate with covariance (error-state EKF).
 
     .. pydrake_system::

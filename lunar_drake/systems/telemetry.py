@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy.telemetry import TELEMETRY_FIELDS, pack_telemetry
 from lunar_drake.comms.messages import Ledger, Message, payload_size_bytes
+from lunar_drake.systems.leaf import Leaf
 
 TOPIC = "telemetry"
 
 
-class TelemetryPacketizer(LeafSystem):
+class TelemetryPacketizer(Leaf):
     """Flight: packs the rover's housekeeping into a telemetry message at ``rate_hz``.
 
     .. pydrake_system::
@@ -65,7 +66,7 @@ class TelemetryPacketizer(LeafSystem):
         state.get_mutable_abstract_state(self._outbox).set_value((msg,))
 
 
-class TelemetryReceiver(LeafSystem):
+class TelemetryReceiver(Leaf):
     """Ground: takes in the telemetry the downlink delivered, in order, once each.
 
     .. pydrake_system::

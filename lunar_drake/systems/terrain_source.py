@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
 
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
 
-class TerrainSource(LeafSystem):
+class TerrainSource(Leaf):
     """Publishes the site terrain for every consumer (contact, renderer, science, maps).
 
     .. pydrake_system::

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import EventStatus, LeafSystem
+from pydrake.systems.framework import EventStatus
 
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
 
@@ -46,7 +47,7 @@ def terrain_lod_mesh(
     return verts, faces.astype(np.int32), colors
 
 
-class TerrainVisualizer(LeafSystem):
+class TerrainVisualizer(Leaf):
     """Sends the terrain to Meshcat once, at initialization.
 
     .. pydrake_system::

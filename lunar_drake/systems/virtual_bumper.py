@@ -6,19 +6,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
 from lunar_drake.autonomy.commands import MODES, SAFE_REASONS
 from lunar_drake.autonomy.odometry import body_displacement
 from lunar_drake.autonomy.safety import SafetyConfig, bumper_step
 from lunar_drake.dynamics.kinematics import wheel_geometry_for
+from lunar_drake.systems.leaf import Leaf
 
 N_WHEELS = 4
 # State: [previous wheel angles (4), timers (3), started, trip (index into SAFE_REASONS)]
 _ANG, _TIM, _STARTED, _TRIP = slice(0, 4), slice(4, 7), 7, 8
 
 
-class VirtualBumper(LeafSystem):
+class VirtualBumper(Leaf):
     """Watches tilt, wheel stall and yaw slip while the rover drives.
 
     .. pydrake_system::

@@ -31,7 +31,9 @@ motor can drive.
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, DiscreteStateIndex, LeafSystem
+from pydrake.systems.framework import BasicVector, DiscreteStateIndex
+
+from lunar_drake.systems.leaf import Leaf
 
 __all__ = ["WheelBrakes", "brake_stiffness", "brake_torque", "brake_update"]
 
@@ -75,7 +77,7 @@ def brake_update(
     return q - np.minimum(np.maximum(q - latch, -slack), slack), True
 
 
-class WheelBrakes(LeafSystem):
+class WheelBrakes(Leaf):
     """Elasto-plastic parking brakes on a rover's drive joints (module docstring).
 
     .. pydrake_system::

@@ -15,7 +15,6 @@ from pydrake.systems.framework import (
     AbstractParameterIndex,
     BasicVector,
     DiscreteStateIndex,
-    LeafSystem,
     ValueProducer,
 )
 
@@ -27,6 +26,7 @@ from lunar_drake.dynamics.contact_geometry import (
     footprint_pattern,
     wheel_contact_geometry,
 )
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
 #: Columns of the ``wheel_state`` output, per wheel.
@@ -60,7 +60,7 @@ class _Contact(NamedTuple):
     off: bool
 
 
-class WheelRegolithContact(LeafSystem):
+class WheelRegolithContact(Leaf):
     """Per-wheel soil contact from the Heightfield: one Wong-Reece wheel per wheel (normal
     and Janosi-Hanamoto shear stresses over the contact angle give the load carried at
     the current sinkage and slip, the traction, compaction resistance and torque, and

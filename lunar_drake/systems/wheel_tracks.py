@@ -8,10 +8,10 @@ import math
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import LeafSystem
 
 from lunar_drake.errors import ConfigError, OutOfRangeError
 from lunar_drake.render.tracks import TrackProfile, TrackRaster
+from lunar_drake.systems.leaf import Leaf
 from lunar_drake.systems.wheel_regolith_contact import WHEEL_STATE_FIELDS
 
 _NF = len(WHEEL_STATE_FIELDS)
@@ -22,7 +22,7 @@ LAST_CONTACT_FIELDS = ("x_m", "y_m", "sinkage_m", "arc_length_m", "in_contact")
 _NL = len(LAST_CONTACT_FIELDS)
 
 
-class WheelTracks(LeafSystem):
+class WheelTracks(Leaf):
     """Stamps each wheel's groove into a :class:`~lunar_drake.render.tracks.TrackRaster`
     at a fixed period.
 
