@@ -36,6 +36,7 @@ from lunar_drake import moon
 from lunar_drake.dynamics import terramechanics as tm
 from lunar_drake.ephemeris.sun_earth import SiteLocation
 from lunar_drake.errors import ConfigError
+from lunar_drake.models.plant_tree import tree_kinematics_from_plant
 from lunar_drake.models.rover_sdf import RoverModel, add_rover
 from lunar_drake.models.spawn import spawn_pose
 from lunar_drake.power.solar_array import PanelMount
@@ -126,7 +127,6 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     )
     plant.SetDefaultFloatingBaseBodyPose(rover.chassis, X_WC)
 
-    body_poses = plant.get_body_poses_output_port()
     d = rover.description
     contact = builder.AddNamedSystem(
         "rover.contact",
@@ -137,12 +137,10 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
             belly_body=rover.chassis.index(),
             belly_points_B=rover.belly_points_C,
             time_step_s=scenario.plant_config.time_step,
+            tree=tree_kinematics_from_plant(plant),
         ),
     )
-    builder.Connect(body_poses, contact.body_poses_input)
-    builder.Connect(
-        plant.get_body_spatial_velocities_output_port(), contact.body_spatial_velocities_input
-    )
+    builder.Connect(plant.get_state_output_port(), contact.plant_state_input)
     builder.Connect(terrain.heightfield_output, contact.heightfield_input)
     builder.Connect(contact.spatial_forces_output, plant.get_applied_spatial_force_input_port())
 

@@ -20,12 +20,14 @@ from pydrake.systems.framework import (
 
 from lunar_drake.dynamics import contact_kernels as ck
 from lunar_drake.dynamics import terramechanics as tm
+from lunar_drake.dynamics import tree_kinematics as tk
 from lunar_drake.dynamics.contact_geometry import (
     FootprintSampling,
     belly_penetration,
     footprint_pattern,
     wheel_contact_geometry,
 )
+from lunar_drake.dynamics.tree_kinematics import TreeKinematics
 from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
@@ -72,8 +74,8 @@ class WheelRegolithContact(Leaf):
 
         name: WheelRegolithContact
         input_ports:
-        - body_poses
-        - body_spatial_velocities
+        - body_poses (or plant_state)
+        - body_spatial_velocities (or none)
         - heightfield
         output_ports:
         - spatial_forces
@@ -108,6 +110,13 @@ class WheelRegolithContact(Leaf):
     Both stages and the patch update are compiled
     (:mod:`lunar_drake.dynamics.contact_kernels`: terramechanics' formulas, one call each).
 
+    The bodies' poses and spatial velocities come from the plant's ``body_poses`` and
+    ``body_spatial_velocities`` ports, or, given ``tree`` (the plant's joint tree,
+    :func:`~lunar_drake.models.plant_tree.tree_kinematics_from_plant`), from its state
+    port ``plant_state`` (``[q, v]``) through the compiled forward kinematics of
+    :mod:`lunar_drake.dynamics.tree_kinematics` (the same values to round-off, without
+    converting two lists of every body to Python each step).
+
     The soil is an abstract *parameter* (default: the ``soil`` argument), so a Context
     may carry another soil without rebuilding the diagram (:meth:`get_soil`,
     :meth:`set_soil`).
@@ -123,6 +132,9 @@ class WheelRegolithContact(Leaf):
         time_step_s: period of the patch update (s); the plant's time step.
         patch: static shear patch parameters (default :class:`ShearPatchParams()
             <lunar_drake.dynamics.terramechanics.ShearPatchParams>`).
+        tree: the plant's joint tree: read the bodies from a ``plant_state`` port
+            instead of the two list ports (``body_poses_input`` and
+            ``body_spatial_velocities_input`` are then None).
     """
 
     def __init__(
@@ -141,6 +153,7 @@ class WheelRegolithContact(Leaf):
         direction_eps: float = 0.02,
         time_step_s: float = 0.01,
         patch: tm.ShearPatchParams | None = None,
+        tree: TreeKinematics | None = None,
     ):
         super().__init__()
         self._wheels = [int(b) for b in wheel_bodies]
@@ -187,12 +200,22 @@ class WheelRegolithContact(Leaf):
         self.DeclarePeriodicDiscreteUpdateEvent(
             period_sec=self._dt, offset_sec=0.0, update=self._update_patch
         )
-        self.body_poses_input = self.DeclareAbstractInputPort(
-            "body_poses", AbstractValue.Make([RigidTransform()])
-        )
-        self.body_spatial_velocities_input = self.DeclareAbstractInputPort(
-            "body_spatial_velocities", AbstractValue.Make([SpatialVelocity()])
-        )
+        self._tree = None  # (kernel arguments, bodies) of the compiled kinematics
+        self.body_poses_input = self.body_spatial_velocities_input = self.plant_state_input = None
+        if tree is None:
+            self.body_poses_input = self.DeclareAbstractInputPort(
+                "body_poses", AbstractValue.Make([RigidTransform()])
+            )
+            self.body_spatial_velocities_input = self.DeclareAbstractInputPort(
+                "body_spatial_velocities", AbstractValue.Make([SpatialVelocity()])
+            )
+            kinematic_inputs = (self.body_poses_input, self.body_spatial_velocities_input)
+        else:
+            if max(self._bodies) >= tree.n_bodies:
+                raise ValueError(f"bodies {self._bodies} are not all in the tree's {tree.n_bodies}")
+            self._tree = (tk.kernel_args(tree), np.asarray(self._bodies, np.int64))
+            self.plant_state_input = self.DeclareVectorInputPort("plant_state", tree.nq + tree.nv)
+            kinematic_inputs = (self.plant_state_input,)
         self.heightfield_input = self.DeclareAbstractInputPort(
             "heightfield",
             AbstractValue.Make(Heightfield.from_array(np.zeros((4, 4)), resolution_m=1.0)),
@@ -212,8 +235,7 @@ class WheelRegolithContact(Leaf):
                 calc=lambda context, out: out.set_value(self._compute_kinematics(context)),
             ),
             prerequisites_of_calc={
-                self.input_port_ticket(self.body_poses_input.get_index()),
-                self.input_port_ticket(self.body_spatial_velocities_input.get_index()),
+                *(self.input_port_ticket(p.get_index()) for p in kinematic_inputs),
                 self.input_port_ticket(self.heightfield_input.get_index()),
                 soil_ticket,
             },
@@ -271,17 +293,21 @@ class WheelRegolithContact(Leaf):
 
     # -- core ---------------------------------------------------------------------------
     def _compute_kinematics(self, context) -> _Kinematics:
-        poses = self.body_poses_input.Eval(context)
-        vels = self.body_spatial_velocities_input.Eval(context)
         hf = self.heightfield_input.Eval(context)
         par, const = self._constants(self.get_soil(context))
         n = self._n
         # the wheels' and the chassis' poses and velocities, one array each (scratch:
         # the kernel copies what the cache value keeps)
         X, V = self._X, self._V  # (n [+1], 3, 4), (n [+1], 6): [w, v]
-        for k, i in enumerate(self._bodies):
-            X[k] = poses[i].GetAsMatrix34()
-            V[k] = vels[i].get_coeffs()
+        if self._tree is not None:
+            args, bodies = self._tree
+            tk.body_kinematics_kernel(*args, self.plant_state_input.Eval(context), bodies, X, V)
+        else:
+            poses = self.body_poses_input.Eval(context)
+            vels = self.body_spatial_velocities_input.Eval(context)
+            for k, i in enumerate(self._bodies):
+                X[k] = poses[i].GetAsMatrix34()
+                V[k] = vels[i].get_coeffs()
         belly_B = self._belly_pts if self._belly is not None else np.zeros((0, 3))
         memo = self._raster_memo
         if memo is None or memo[0] is not hf:
