@@ -5,9 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import BodyIndex
+from pydrake.multibody.tree import (
+    BodyIndex,
+    FixedOffsetFrame,
+    PrismaticJoint,
+    RevoluteJoint,
+    SpatialInertia,
+)
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.dynamics import terramechanics as tm
@@ -32,24 +38,23 @@ def _plant(preset, builder=None):
 
 
 def _random_state(plant, rng, *, unit_quaternion=True):
+    """Random [q, v] with each floating body's quaternion unit (or 1.7 x unit)."""
     x = rng.normal(size=plant.num_multibody_states())
-    x[:4] /= np.linalg.norm(x[:4])  # the chassis' floating joint comes first
-    if not unit_quaternion:
-        x[:4] *= 1.7
-    x[4:7] *= 20.0
+    for i in plant.GetJointIndices():
+        j = plant.get_joint(i)
+        if j.type_name() == "quaternion_floating":
+            k = j.position_start()
+            x[k : k + 4] *= (1.0 if unit_quaternion else 1.7) / np.linalg.norm(x[k : k + 4])
+            x[k + 4 : k + 7] *= 20.0
     return x
 
 
-@pytest.mark.parametrize("preset", ["explicit", "skid"])
-def test_poses_and_velocities_match_drake(preset):
-    _, plant, _ = _plant(preset)
-    tree = tree_kinematics_from_plant(plant)
+def _assert_matches_drake(plant, tree, rng, trials=20):
     ctx = plant.CreateDefaultContext()
     bodies = np.arange(plant.num_bodies())
     X = np.empty((len(bodies), 3, 4))
     V = np.empty((len(bodies), 6))
-    rng = np.random.default_rng(7)
-    for trial in range(20):
+    for trial in range(trials):
         x = _random_state(plant, rng, unit_quaternion=trial % 2 == 0)
         plant.SetPositionsAndVelocities(ctx, x)
         body_kinematics(tree, x, bodies, X, V)
@@ -61,11 +66,59 @@ def test_poses_and_velocities_match_drake(preset):
             np.testing.assert_allclose(V[b], V_ref, rtol=0, atol=1e-11)
 
 
-def test_a_wrong_state_size_is_refused():
-    _, plant, _ = _plant("skid")
+@pytest.mark.parametrize("preset", ["explicit", "skid"])
+def test_poses_and_velocities_match_drake(preset):
+    _, plant, _ = _plant(preset)
+    _assert_matches_drake(plant, tree_kinematics_from_plant(plant), np.random.default_rng(7))
+
+
+def test_other_bodies_and_offset_frames_match_drake():
+    """Beside the rover: a second free body, a body welded off the world's origin and a
+    pendulum whose joint frames are offset and rotated, about an oblique axis."""
+    b = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.01), b)
+    inertia = SpatialInertia.SolidSphereWithMass(1.0, 0.1)
+    plant.AddRigidBody("rock", inertia)  # free: a floating joint after the rover's
+    add_rover(plant, description=rover_preset("explicit"))
+    extra = plant.AddModelInstance("extra")
+    post = plant.AddRigidBody("post", extra, inertia)
+    X_WP = RigidTransform(RollPitchYaw(0.1, -0.2, 0.3), [1.0, 2.0, 0.5])
+    plant.WeldFrames(plant.world_frame(), post.body_frame(), X_WP)
+    bob = plant.AddRigidBody("bob", extra, inertia)
+    F = plant.AddFrame(
+        FixedOffsetFrame(
+            "F", post.body_frame(), RigidTransform(RollPitchYaw(0.3, 0.0, -0.1), [0.2, 0, 0])
+        )
+    )
+    M = plant.AddFrame(
+        FixedOffsetFrame(
+            "M", bob.body_frame(), RigidTransform(RollPitchYaw(0.0, 0.4, 0.2), [0, 0, -0.5])
+        )
+    )
+    plant.AddJoint(RevoluteJoint("hinge", F, M, np.array([1.0, 2.0, 2.0]) / 3.0))
+    plant.Finalize()
+    _assert_matches_drake(plant, tree_kinematics_from_plant(plant), np.random.default_rng(11))
+
+
+def test_wrong_sizes_and_bodies_are_refused():
+    _, plant, rover = _plant("skid")
     tree = tree_kinematics_from_plant(plant)
+    x = np.zeros(tree.nq + tree.nv)
+    X, V = np.empty((1, 3, 4)), np.empty((1, 6))
     with pytest.raises(ConfigError, match=r"state has shape \(3,\)"):
-        body_kinematics(tree, np.zeros(3), [1], np.empty((1, 3, 4)), np.empty((1, 6)))
+        body_kinematics(tree, np.zeros(3), [1], X, V)
+    with pytest.raises(ConfigError, match=r"bodies \[99\]: a body index is 0\.\."):
+        body_kinematics(tree, x, [99], X, V)
+    with pytest.raises(ConfigError, match=r"2 bodies need \(2, 3, 4\)"):
+        body_kinematics(tree, x, [1, 2], X, V)
+    d = rover.description
+    with pytest.raises(ConfigError, match=r"bodies \[\d+, -1\]: a BodyIndex of the tree"):
+        WheelRegolithContact(
+            wheel_bodies=[rover.wheels[0].index(), -1],
+            wheel=tm.WheelParams(radius_m=d.wheel_radius_m, width_m=d.wheel_width_m),
+            soil=tm.soil_preset("lunar_regolith"),
+            tree=tree,
+        )
 
 
 def test_contact_from_the_state_equals_contact_from_the_body_ports():
@@ -114,12 +167,20 @@ def test_contact_from_the_state_equals_contact_from_the_body_ports():
 
 
 def test_a_joint_the_kernel_does_not_model_is_refused():
-    from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
-
     b = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.01), b)
     body = plant.AddRigidBody("slider", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
     plant.AddJoint(PrismaticJoint("rail", plant.world_frame(), body.body_frame(), [1, 0, 0]))
     plant.Finalize()
     with pytest.raises(ConfigError, match="'rail' is 'prismatic'"):
+        tree_kinematics_from_plant(plant)
+
+
+def test_a_joint_whose_child_is_the_world_is_refused():
+    b = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.01), b)
+    body = plant.AddRigidBody("arm", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
+    plant.AddJoint(RevoluteJoint("reversed", body.body_frame(), plant.world_frame(), [0, 0, 1]))
+    plant.Finalize()
+    with pytest.raises(ConfigError, match=r"joint 'reversed': body 'world'.*exactly one joint"):
         tree_kinematics_from_plant(plant)

@@ -67,14 +67,21 @@ class TreeKinematics:
 def body_kinematics(tree: TreeKinematics, x, bodies, X_out, V_out) -> None:
     """Fills ``X_out[k]`` (3, 4) ``[R_WB | p_WB]`` and ``V_out[k]`` (6,) ``[w_WB, v_WBo]``
     (rad/s, m/s; in W) of body ``bodies[k]`` from the state ``x = [q, v]``
-    (``tree.nq + tree.nv``)."""
+    (``tree.nq + tree.nv``). Raises ConfigError for a state, body index or output of
+    the wrong size."""
     x = np.asarray(x, dtype=np.float64)
     if x.shape != (tree.nq + tree.nv,):
         raise ConfigError(f"state has shape {x.shape}; the tree needs ({tree.nq + tree.nv},)")
-    body_kinematics_kernel(
-        tree.order, tree.parent, tree.kind, tree.q_start, tree.v_start + tree.nq, tree.X_PF,
-        tree.X_MB, tree.X_FM, tree.axis_F, x, np.asarray(bodies, np.int64), X_out, V_out,
-    )  # fmt: skip
+    bodies = np.asarray(bodies, np.int64).ravel()
+    if bodies.size and (bodies.min() < 0 or bodies.max() >= tree.n_bodies):
+        raise ConfigError(f"bodies {bodies.tolist()}: a body index is 0..{tree.n_bodies - 1}")
+    m = len(bodies)
+    if np.shape(X_out) != (m, 3, 4) or np.shape(V_out) != (m, 6):
+        raise ConfigError(
+            f"outputs of shapes {np.shape(X_out)} and {np.shape(V_out)}; "
+            f"{m} bodies need ({m}, 3, 4) and ({m}, 6)"
+        )
+    body_kinematics_kernel(*kernel_args(tree), x, bodies, X_out, V_out)
 
 
 def kernel_args(tree: TreeKinematics) -> tuple:
@@ -124,9 +131,9 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
         w_FM[:] = 0.0
         v_FM[:] = 0.0
         k = kind[b]
-        if k == 0:  # weld
+        if k == WELD:
             X_FM[:, :] = X_FM_weld[b]
-        elif k == 1:  # revolute: Rodrigues about the axis, origin on it
+        elif k == REVOLUTE:  # Rodrigues about the axis, origin on it
             q = x[q_start[b]]
             c = np.cos(q)
             s = np.sin(q)
@@ -148,7 +155,8 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
             w_FM[0] = ax * qd
             w_FM[1] = ay * qd
             w_FM[2] = az * qd
-        else:  # quaternion floating: [qw, qx, qy, qz, x, y, z], v = [w_FM, v_FM] in F
+        else:  # QUATERNION_FLOATING (the only other code)
+            # q = [qw, qx, qy, qz, x, y, z], v = [w_FM, v_FM] in F
             i0 = q_start[b]
             w, qx, qy, qz = x[i0], x[i0 + 1], x[i0 + 2], x[i0 + 3]
             s = 2.0 / (w * w + qx * qx + qy * qy + qz * qz)  # unit or not, as Drake

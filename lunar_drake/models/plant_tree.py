@@ -4,7 +4,7 @@ TreeKinematics` data (read once, after ``Finalize``)."""
 from __future__ import annotations
 
 import numpy as np
-from pydrake.multibody.tree import BodyIndex, JointIndex
+from pydrake.multibody.tree import BodyIndex
 
 from lunar_drake.dynamics.tree_kinematics import JOINT_KINDS, TreeKinematics
 from lunar_drake.errors import ConfigError
@@ -24,8 +24,9 @@ def tree_kinematics_from_plant(plant) -> TreeKinematics:
     X_MB = np.tile(eye, (nb, 1, 1))
     X_FM = np.tile(eye, (nb, 1, 1))
     axis_F = np.zeros((nb, 3))
-    for i in range(plant.num_joints()):
-        j = plant.get_joint(JointIndex(i))
+    world = int(plant.world_body().index())
+    for i in plant.GetJointIndices():
+        j = plant.get_joint(i)
         name = j.type_name()
         if name not in JOINT_KINDS:
             raise ConfigError(
@@ -33,8 +34,12 @@ def tree_kinematics_from_plant(plant) -> TreeKinematics:
                 f"{sorted(JOINT_KINDS)}"
             )
         b = int(j.child_body().index())
-        if parent[b] != -1:
-            raise ConfigError(f"body {j.child_body().name()!r} is the child of two joints")
+        if b == world or parent[b] != -1:
+            raise ConfigError(
+                f"joint {j.name()!r}: body {j.child_body().name()!r} already hangs from a "
+                "joint or is the world; each body needs exactly one joint with the body as "
+                "its child, its parent nearer the world"
+            )
         parent[b] = int(j.parent_body().index())
         kind[b] = JOINT_KINDS[name]
         q_start[b] = j.position_start()
@@ -45,12 +50,14 @@ def tree_kinematics_from_plant(plant) -> TreeKinematics:
             X_FM[b] = j.X_FM().GetAsMatrix34()
         elif name == "revolute":
             axis_F[b] = j.revolute_axis()
-    world = int(plant.world_body().index())
     unplaced = [
         plant.get_body(BodyIndex(b)).name() for b in range(nb) if b != world and parent[b] < 0
     ]
     if unplaced:
-        raise ConfigError(f"bodies {unplaced} hang from no joint (not a tree from the world)")
+        raise ConfigError(
+            f"bodies {unplaced} are the child of no joint; each body needs exactly one joint "
+            "with the body as its child, its parent nearer the world"
+        )
     depth = np.zeros(nb, np.int64)
     for b in range(nb):
         a = b

@@ -14,7 +14,9 @@ and clears it, in every system, at every step: 5-6 % of a no-camera mission's ru
 C++ ``DoGetWitnessFunctions``) under that attribute: pybind11 finds a C++ function, records
 the class as not overriding it and, from then on, calls the C++ default (no witness
 functions) without touching Python. A subclass that declares witness functions overrides
-``DoGetWitnessFunctions`` in Python as usual; pybind11 then finds and calls that.
+``DoGetWitnessFunctions`` in Python as usual, in the class itself or a base ahead of
+:class:`Leaf` in its MRO; pybind11 then finds and calls that. (An override set on an
+instance after the class's first lookup, or in a mixin listed after Leaf, is not seen.)
 """
 
 from __future__ import annotations

@@ -28,6 +28,7 @@ from lunar_drake.dynamics.contact_geometry import (
     wheel_contact_geometry,
 )
 from lunar_drake.dynamics.tree_kinematics import TreeKinematics
+from lunar_drake.errors import ConfigError
 from lunar_drake.systems.leaf import Leaf
 from lunar_drake.terrain.heightfield import Heightfield
 
@@ -74,8 +75,9 @@ class WheelRegolithContact(Leaf):
 
         name: WheelRegolithContact
         input_ports:
-        - body_poses (or plant_state)
-        - body_spatial_velocities (or none)
+        - body_poses (without tree)
+        - body_spatial_velocities (without tree)
+        - plant_state (with tree)
         - heightfield
         output_ports:
         - spatial_forces
@@ -211,8 +213,10 @@ class WheelRegolithContact(Leaf):
             )
             kinematic_inputs = (self.body_poses_input, self.body_spatial_velocities_input)
         else:
-            if max(self._bodies) >= tree.n_bodies:
-                raise ValueError(f"bodies {self._bodies} are not all in the tree's {tree.n_bodies}")
+            if min(self._bodies) < 0 or max(self._bodies) >= tree.n_bodies:
+                raise ConfigError(
+                    f"bodies {self._bodies}: a BodyIndex of the tree is 0..{tree.n_bodies - 1}"
+                )
             self._tree = (tk.kernel_args(tree), np.asarray(self._bodies, np.int64))
             self.plant_state_input = self.DeclareVectorInputPort("plant_state", tree.nq + tree.nv)
             kinematic_inputs = (self.plant_state_input,)
