@@ -107,6 +107,8 @@ def test_wrong_sizes_and_bodies_are_refused():
     X, V = np.empty((1, 3, 4)), np.empty((1, 6))
     with pytest.raises(ConfigError, match=r"state has shape \(3,\)"):
         body_kinematics(tree, np.zeros(3), [1], X, V)
+    with pytest.raises(ConfigError, match=r"state has 1 non-finite value"):
+        body_kinematics(tree, np.where(np.arange(x.size) == 5, np.nan, x), [1], X, V)
     with pytest.raises(ConfigError, match=r"bodies \[99\]: a body index is 0\.\."):
         body_kinematics(tree, x, [99], X, V)
     with pytest.raises(ConfigError, match=r"2 bodies need \(2, 3, 4\)"):
@@ -166,21 +168,24 @@ def test_contact_from_the_state_equals_contact_from_the_body_ports():
             )
 
 
-def test_a_joint_the_kernel_does_not_model_is_refused():
+@pytest.mark.parametrize(
+    "make_joint, message",
+    [
+        # a joint type the kernel does not model
+        (lambda w, b: PrismaticJoint("rail", w, b, [1, 0, 0]), r"'rail' is 'prismatic'"),
+        # a joint whose child is the world (its parent farther from the world)
+        (
+            lambda w, b: RevoluteJoint("reversed", b, w, [0, 0, 1]),
+            r"joint 'reversed': body 'world'.*exactly one joint",
+        ),
+    ],
+    ids=["prismatic", "reversed"],
+)
+def test_a_tree_the_kernel_cannot_follow_is_refused(make_joint, message):
     b = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.01), b)
-    body = plant.AddRigidBody("slider", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
-    plant.AddJoint(PrismaticJoint("rail", plant.world_frame(), body.body_frame(), [1, 0, 0]))
+    body = plant.AddRigidBody("link", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
+    plant.AddJoint(make_joint(plant.world_frame(), body.body_frame()))
     plant.Finalize()
-    with pytest.raises(ConfigError, match="'rail' is 'prismatic'"):
-        tree_kinematics_from_plant(plant)
-
-
-def test_a_joint_whose_child_is_the_world_is_refused():
-    b = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.01), b)
-    body = plant.AddRigidBody("arm", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
-    plant.AddJoint(RevoluteJoint("reversed", body.body_frame(), plant.world_frame(), [0, 0, 1]))
-    plant.Finalize()
-    with pytest.raises(ConfigError, match=r"joint 'reversed': body 'world'.*exactly one joint"):
+    with pytest.raises(ConfigError, match=message):
         tree_kinematics_from_plant(plant)

@@ -67,11 +67,16 @@ class TreeKinematics:
 def body_kinematics(tree: TreeKinematics, x, bodies, X_out, V_out) -> None:
     """Fills ``X_out[k]`` (3, 4) ``[R_WB | p_WB]`` and ``V_out[k]`` (6,) ``[w_WB, v_WBo]``
     (rad/s, m/s; in W) of body ``bodies[k]`` from the state ``x = [q, v]``
-    (``tree.nq + tree.nv``). Raises ConfigError for a state, body index or output of
-    the wrong size."""
+    (``tree.nq + tree.nv``). Raises ConfigError for a state of the wrong size or not
+    finite, a body index out of the tree or outputs of the wrong shape."""
     x = np.asarray(x, dtype=np.float64)
     if x.shape != (tree.nq + tree.nv,):
         raise ConfigError(f"state has shape {x.shape}; the tree needs ({tree.nq + tree.nv},)")
+    bad = int(np.count_nonzero(~np.isfinite(x)))
+    if bad:
+        raise ConfigError(
+            f"state has {bad} non-finite value(s); positions and velocities must be finite"
+        )
     bodies = np.asarray(bodies, np.int64).ravel()
     if bodies.size and (bodies.min() < 0 or bodies.max() >= tree.n_bodies):
         raise ConfigError(f"bodies {bodies.tolist()}: a body index is 0..{tree.n_bodies - 1}")
