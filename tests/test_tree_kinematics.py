@@ -1,15 +1,18 @@
-"""Compiled forward kinematics of the rover's joint tree against Drake's MultibodyPlant,
-and the contact fed by it against the contact fed by the plant's body ports."""
+"""Compiled forward kinematics and generalized forces of the rover's joint tree against
+Drake's MultibodyPlant, and the contact fed by it against the contact fed by the plant's
+body ports."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import (
     BodyIndex,
     FixedOffsetFrame,
+    MultibodyForces,
     PrismaticJoint,
     RevoluteJoint,
     SpatialInertia,
@@ -17,7 +20,7 @@ from pydrake.multibody.tree import (
 from pydrake.systems.framework import DiagramBuilder
 
 from lunar_drake.dynamics import terramechanics as tm
-from lunar_drake.dynamics.tree_kinematics import body_kinematics
+from lunar_drake.dynamics.tree_kinematics import body_kinematics, generalized_forces
 from lunar_drake.errors import ConfigError
 from lunar_drake.models.plant_tree import tree_kinematics_from_plant
 from lunar_drake.models.rover_description import rover_preset
@@ -49,6 +52,14 @@ def _random_state(plant, rng, *, unit_quaternion=True):
     return x
 
 
+def _drake_generalized_forces(plant, ctx, bodies, F_W):
+    """Drake's J^T F of spatial forces F_W[k] (moment, force; W) at each body's origin."""
+    forces = MultibodyForces(plant)
+    for b, F in zip(bodies, F_W, strict=True):
+        plant.get_body(BodyIndex(int(b))).AddInForceInWorld(ctx, SpatialForce(F), forces)
+    return plant.CalcGeneralizedForces(ctx, forces)
+
+
 def _assert_matches_drake(plant, tree, rng, trials=20):
     ctx = plant.CreateDefaultContext()
     bodies = np.arange(plant.num_bodies())
@@ -64,6 +75,14 @@ def _assert_matches_drake(plant, tree, rng, trials=20):
             V_ref = plant.EvalBodySpatialVelocityInWorld(ctx, body).get_coeffs()
             np.testing.assert_allclose(X[b], X_ref, rtol=0, atol=1e-12)
             np.testing.assert_allclose(V[b], V_ref, rtol=0, atol=1e-11)
+        # every body but the world pushed at once, and each body alone
+        moving = bodies[1:]
+        F_W = 100.0 * rng.normal(size=(len(moving), 6))
+        tau = np.full(plant.num_velocities(), np.nan)
+        for sel in [slice(None), *(slice(k, k + 1) for k in range(len(moving)))]:
+            generalized_forces(tree, x, moving[sel], F_W[sel], tau)
+            ref = _drake_generalized_forces(plant, ctx, moving[sel], F_W[sel])
+            np.testing.assert_allclose(tau, ref, rtol=0, atol=1e-10 * max(1.0, abs(ref).max()))
 
 
 @pytest.mark.parametrize("preset", ["explicit", "skid"])
@@ -113,6 +132,13 @@ def test_wrong_sizes_and_bodies_are_refused():
         body_kinematics(tree, x, [99], X, V)
     with pytest.raises(ConfigError, match=r"2 bodies need \(2, 3, 4\)"):
         body_kinematics(tree, x, [1, 2], X, V)
+    tau = np.empty(tree.nv)
+    with pytest.raises(ConfigError, match=rf"2 bodies need \(2, 6\) and \({tree.nv},\)"):
+        generalized_forces(tree, x, [1, 2], np.zeros((3, 6)), tau)
+    with pytest.raises(ConfigError, match=r"output of shape \(2,\)"):
+        generalized_forces(tree, x, [1], np.zeros((1, 6)), np.empty(2))
+    with pytest.raises(ConfigError, match=r"bodies \[99\]: a body index is 0\.\."):
+        generalized_forces(tree, x, [99], np.zeros((1, 6)), tau)
     d = rover.description
     with pytest.raises(ConfigError, match=r"bodies \[\d+, -1\]: a BodyIndex of the tree"):
         WheelRegolithContact(
@@ -166,6 +192,14 @@ def test_contact_from_the_state_equals_contact_from_the_body_ports():
             np.testing.assert_allclose(
                 es.F_Bq_W.get_coeffs(), ea.F_Bq_W.get_coeffs(), rtol=1e-9, atol=1e-7
             )
+        # the generalized forces the plant's diagram applies: Drake's J^T F of the list
+        assert ports.generalized_force_output is None
+        tau = state.generalized_force_output.Eval(state.GetMyContextFromRoot(ctx))
+        ref = _drake_generalized_forces(
+            plant, plant_ctx, [e.body_index for e in fa], [e.F_Bq_W.get_coeffs() for e in fa]
+        )
+        assert np.abs(ref).max() > 1.0
+        np.testing.assert_allclose(tau, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
 
 
 @pytest.mark.parametrize(

@@ -25,6 +25,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (
+    Adder,
     ConstantVectorSource,
     MatrixGain,
     Multiplexer,
@@ -142,9 +143,10 @@ def MakePlantDiagram(*, scenario: Scenario, site: SiteData, meshcat=None):
     )
     builder.Connect(plant.get_state_output_port(), contact.plant_state_input)
     builder.Connect(terrain.heightfield_output, contact.heightfield_input)
-    builder.Connect(contact.spatial_forces_output, plant.get_applied_spatial_force_input_port())
-
-    _add_actuators(builder, plant=plant, rover=rover, time_step_s=scenario.plant_config.time_step)
+    _add_actuators(
+        builder, plant=plant, rover=rover, time_step_s=scenario.plant_config.time_step,
+        contact_force=contact.generalized_force_output,
+    )  # fmt: skip
     _add_sensors(builder, scenario=scenario, plant=plant, rover=rover)
     if scenario.sensors.nss.enabled:
         _add_nss(builder, scenario=scenario, plant=plant, rover=rover, site=site)
@@ -224,8 +226,11 @@ def servo_setpoint_gain(plant, rover: RoverModel) -> np.ndarray:
     return m
 
 
-def _add_actuators(builder, *, plant, rover: RoverModel, time_step_s: float) -> None:
-    """Servo set-points from the commands, zero feed-forward torque, and the brakes."""
+def _add_actuators(builder, *, plant, rover: RoverModel, time_step_s: float,
+                   contact_force) -> None:  # fmt: skip
+    """Servo set-points from the commands, zero feed-forward torque, and the brakes,
+    whose generalized forces are added to the contact's (``contact_force``, (nv,)) on
+    the plant's applied generalized force."""
     sizes = [len(rover.drive_joints), len(rover.steer_joints), 2]
     names = [n for n, k in zip(COMMAND_PORTS, sizes, strict=True) if k]
     mux = builder.AddNamedSystem("rover.command_mux", Multiplexer([k for k in sizes if k]))
@@ -247,9 +252,10 @@ def _add_actuators(builder, *, plant, rover: RoverModel, time_step_s: float) -> 
         "rover.brakes", WheelBrakes(plant=plant, rover=rover, time_step_s=time_step_s)
     )
     builder.Connect(plant.get_state_output_port(), brakes.state_input)
-    builder.Connect(
-        brakes.generalized_force_output, plant.get_applied_generalized_force_input_port()
-    )
+    forces = builder.AddNamedSystem("rover.applied_forces", Adder(2, plant.num_velocities()))
+    builder.Connect(contact_force, forces.get_input_port(0))
+    builder.Connect(brakes.generalized_force_output, forces.get_input_port(1))
+    builder.Connect(forces.get_output_port(), plant.get_applied_generalized_force_input_port())
     builder.ExportInput(brakes.brake_command_input, "rover.brake_command")
 
 

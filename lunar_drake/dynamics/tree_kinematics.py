@@ -1,13 +1,16 @@
 """Forward kinematics of a rover's joint tree from its state vector: each body's pose
 ``X_WB`` and spatial velocity ``V_WB`` (angular, then the velocity of its origin; both in
-W), compiled.
+W), and the generalized forces ``J^T F`` of spatial forces on its bodies; compiled.
 
 The contact needs five bodies' poses and velocities at every plant step. Read from the
 MultibodyPlant's list ports they cost 45 us a step in conversions to Python (a list of
 16 RigidTransforms, one of 16 SpatialVelocities, then one array each); from the plant's
 state vector and :func:`body_kinematics` about 5 us. The tree (parents, joint types,
 fixed frames) is data read once from the plant (:func:`TreeKinematics` fields; the
-Drake side is :func:`lunar_drake.models.plant_tree.tree_kinematics_from_plant`).
+Drake side is :func:`lunar_drake.models.plant_tree.tree_kinematics_from_plant`). The
+contact's forces go back to the plant the same way: as generalized forces
+(:func:`generalized_forces`, a vector port) rather than a list of
+``ExternallyAppliedSpatialForce`` objects built in Python every step.
 
 Joints: weld (fixed ``X_FM``), revolute (angle ``q`` about a unit axis fixed in F and
 M; ``v = q'``) and quaternion floating (``q = [qw, qx, qy, qz, x, y, z]`` of ``X_FM``,
@@ -69,6 +72,18 @@ def body_kinematics(tree: TreeKinematics, x, bodies, X_out, V_out) -> None:
     (rad/s, m/s; in W) of body ``bodies[k]`` from the state ``x = [q, v]``
     (``tree.nq + tree.nv``). Raises ConfigError for a state of the wrong size or not
     finite, a body index out of the tree or outputs of the wrong shape."""
+    x, bodies = _checked(tree, x, bodies)
+    m = len(bodies)
+    if np.shape(X_out) != (m, 3, 4) or np.shape(V_out) != (m, 6):
+        raise ConfigError(
+            f"outputs of shapes {np.shape(X_out)} and {np.shape(V_out)}; "
+            f"{m} bodies need ({m}, 3, 4) and ({m}, 6)"
+        )
+    body_kinematics_kernel(*kernel_args(tree), x, bodies, X_out, V_out)
+
+
+def _checked(tree: TreeKinematics, x, bodies) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, bodies)`` as float64 and int64 arrays, or ConfigError naming what is wrong."""
     x = np.asarray(x, dtype=np.float64)
     if x.shape != (tree.nq + tree.nv,):
         raise ConfigError(f"state has shape {x.shape}; the tree needs ({tree.nq + tree.nv},)")
@@ -80,13 +95,7 @@ def body_kinematics(tree: TreeKinematics, x, bodies, X_out, V_out) -> None:
     bodies = np.asarray(bodies, np.int64).ravel()
     if bodies.size and (bodies.min() < 0 or bodies.max() >= tree.n_bodies):
         raise ConfigError(f"bodies {bodies.tolist()}: a body index is 0..{tree.n_bodies - 1}")
-    m = len(bodies)
-    if np.shape(X_out) != (m, 3, 4) or np.shape(V_out) != (m, 6):
-        raise ConfigError(
-            f"outputs of shapes {np.shape(X_out)} and {np.shape(V_out)}; "
-            f"{m} bodies need ({m}, 3, 4) and ({m}, 6)"
-        )
-    body_kinematics_kernel(*kernel_args(tree), x, bodies, X_out, V_out)
+    return x, bodies
 
 
 def kernel_args(tree: TreeKinematics) -> tuple:
@@ -120,11 +129,25 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
     nb = parent.shape[0]
     X = np.zeros((nb, 3, 4))
     V = np.zeros((nb, 6))
+    X_WF = np.empty((nb, 3, 4))
+    X_WM = np.empty((nb, 3, 4))
+    _tree_kinematics(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
+                     x, X, V, X_WF, X_WM)  # fmt: skip
+    for k in range(bodies.shape[0]):
+        X_out[k] = X[bodies[k]]
+        V_out[k] = V[bodies[k]]
+
+
+@numba.njit(cache=True, inline="always")
+def _tree_kinematics(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
+                     x, X, V, X_WF_all, X_WM_all):  # pragma: no cover  # fmt: skip
+    """Every body's ``X[b]`` and ``V[b]`` (the world's: identity, zero) and every joint's
+    frames ``X_WF_all[b]``, ``X_WM_all[b]`` in W (b > 0) from the state ``x``."""
     for i in range(3):
-        X[0, i, i] = 1.0
-    X_WF = np.empty((3, 4))
+        for j in range(4):
+            X[0, i, j] = 1.0 if i == j else 0.0
+    V[0, :] = 0.0
     X_FM = np.empty((3, 4))
-    X_WM = np.empty((3, 4))
     w_FM = np.zeros(3)
     v_FM = np.zeros(3)
     wB = np.empty(3)
@@ -132,6 +155,8 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
     rB = np.empty(3)
     for b in order:
         p = parent[b]
+        X_WF = X_WF_all[b]
+        X_WM = X_WM_all[b]
         _compose(X[p], X_PF[b], X_WF)
         w_FM[:] = 0.0
         v_FM[:] = 0.0
@@ -197,6 +222,65 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
         V[b, 3] = vM0 + (wB[1] * rB[2] - wB[2] * rB[1])
         V[b, 4] = vM1 + (wB[2] * rB[0] - wB[0] * rB[2])
         V[b, 5] = vM2 + (wB[0] * rB[1] - wB[1] * rB[0])
+
+
+def generalized_forces(tree: TreeKinematics, x, bodies, F_W, tau_out) -> None:
+    """Fills ``tau_out`` (nv,) with the generalized forces ``sum_k J_k^T F_W[k]`` of the
+    spatial forces ``F_W[k]`` (6,) ``[moment about Bo (N m), force (N)]`` in W, applied
+    at the origin of body ``bodies[k]``, in the state ``x = [q, v]``: what Drake's
+    MultibodyPlant applies for the same forces on its ``applied_spatial_force`` port.
+    A revolute joint takes the moment about its origin along its axis; a floating
+    joint the moment and force, expressed in its frame F. Raises ConfigError as
+    :func:`body_kinematics` does, or for forces or an output of the wrong shape."""
+    x, bodies = _checked(tree, x, bodies)
+    m = len(bodies)
+    F_W = np.asarray(F_W, dtype=np.float64)
+    if F_W.shape != (m, 6) or np.shape(tau_out) != (tree.nv,):
+        raise ConfigError(
+            f"forces of shape {F_W.shape} and output of shape {np.shape(tau_out)}; "
+            f"{m} bodies need ({m}, 6) and ({tree.nv},)"
+        )
+    generalized_forces_kernel(*kernel_args(tree), x, bodies, np.ascontiguousarray(F_W), tau_out)
+
+
+@numba.njit(cache=True)
+def generalized_forces_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld,
+                              axis_F, x, bodies, F_W, tau_out):  # pragma: no cover  # fmt: skip
+    """:func:`generalized_forces` compiled: ``*kernel_args(tree), x, bodies, F_W,
+    tau_out`` (no checks). Each force is carried down the path from its body to the
+    world: at each joint, its moment about the joint's origin M, projected on what the
+    joint lets move."""
+    nb = parent.shape[0]
+    X = np.empty((nb, 3, 4))
+    V = np.empty((nb, 6))
+    X_WF = np.empty((nb, 3, 4))
+    X_WM = np.empty((nb, 3, 4))
+    _tree_kinematics(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
+                     x, X, V, X_WF, X_WM)  # fmt: skip
+    v0 = x.shape[0] - tau_out.shape[0]  # v_index is into x = [q, v]
+    tau_out[:] = 0.0
     for k in range(bodies.shape[0]):
-        X_out[k] = X[bodies[k]]
-        V_out[k] = V[bodies[k]]
+        b = bodies[k]
+        m0, m1, m2 = F_W[k, 0], F_W[k, 1], F_W[k, 2]
+        f0, f1, f2 = F_W[k, 3], F_W[k, 4], F_W[k, 5]
+        j = b
+        while parent[j] >= 0:
+            kj = kind[j]
+            if kj != WELD:
+                # the moment about M's origin: m + (p_WBo - p_WM) x f
+                r0 = X[b, 0, 3] - X_WM[j, 0, 3]
+                r1 = X[b, 1, 3] - X_WM[j, 1, 3]
+                r2 = X[b, 2, 3] - X_WM[j, 2, 3]
+                a0 = m0 + (r1 * f2 - r2 * f1)
+                a1 = m1 + (r2 * f0 - r0 * f2)
+                a2 = m2 + (r0 * f1 - r1 * f0)
+                iv = v_index[j] - v0
+                R = X_WF[j]
+                if kj == REVOLUTE:  # (R_WF axis_F) . moment = axis_F . (R_WF^T moment)
+                    for i in range(3):
+                        tau_out[iv] += axis_F[j, i] * (R[0, i] * a0 + R[1, i] * a1 + R[2, i] * a2)
+                else:  # QUATERNION_FLOATING: [w_FM, v_FM] in F, so R_WF^T (moment, force)
+                    for i in range(3):
+                        tau_out[iv + i] += R[0, i] * a0 + R[1, i] * a1 + R[2, i] * a2
+                        tau_out[iv + 3 + i] += R[0, i] * f0 + R[1, i] * f1 + R[2, i] * f2
+            j = parent[j]

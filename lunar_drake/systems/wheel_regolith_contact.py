@@ -81,6 +81,7 @@ class WheelRegolithContact(Leaf):
         - heightfield
         output_ports:
         - spatial_forces
+        - generalized_force (with tree)
         - wheel_state
         - off_terrain
 
@@ -117,7 +118,11 @@ class WheelRegolithContact(Leaf):
     :func:`~lunar_drake.models.plant_tree.tree_kinematics_from_plant`), from its state
     port ``plant_state`` (``[q, v]``) through the compiled forward kinematics of
     :mod:`lunar_drake.dynamics.tree_kinematics` (the same values to round-off, without
-    converting two lists of every body to Python each step).
+    converting two lists of every body to Python each step). With ``tree`` the same
+    forces are also offered as ``generalized_force`` (nv,), the plant's generalized
+    forces ``J^T F`` of them (:func:`~lunar_drake.dynamics.tree_kinematics.
+    generalized_forces`), for the plant's ``applied_generalized_force`` port: the same
+    dynamics to round-off, without building ``ExternallyAppliedSpatialForce`` objects.
 
     The soil is an abstract *parameter* (default: the ``soil`` argument), so a Context
     may carry another soil without rebuilding the diagram (:meth:`get_soil`,
@@ -272,6 +277,19 @@ class WheelRegolithContact(Leaf):
         self.off_terrain_output = self.DeclareVectorOutputPort(
             "off_terrain", BasicVector(1), self._calc_off_terrain, prerequisites_of_calc=cached
         )
+        self.generalized_force_output = None
+        if tree is not None:
+            self._F_W = np.zeros((len(self._bodies), 6))  # scratch of _calc_generalized_force
+            self._gf_args = tk.kernel_args(tree)
+            self.generalized_force_output = self.DeclareVectorOutputPort(
+                "generalized_force",
+                BasicVector(tree.nv),
+                self._calc_generalized_force,
+                prerequisites_of_calc={
+                    self._cache.ticket(),
+                    self.input_port_ticket(self.plant_state_input.get_index()),
+                },
+            )
 
     # -- parameters and state -------------------------------------------------------------
     def get_soil(self, context) -> tm.SoilParams:
@@ -429,6 +447,21 @@ class WheelRegolithContact(Leaf):
             return
         forces[-1].F_Bq_W = SpatialForce(c.belly[1], c.belly[0])
         output.set_value(forces)
+
+    def _calc_generalized_force(self, context, output):
+        c = self._cached(context)
+        F = self._F_W
+        F[: self._n] = c.F6
+        if self._belly is not None:
+            if c.belly is None:
+                F[self._n] = 0.0
+            else:
+                F[self._n, :3] = c.belly[1]
+                F[self._n, 3:] = c.belly[0]
+        tk.generalized_forces_kernel(
+            *self._gf_args, self.plant_state_input.Eval(context), self._tree[1], F,
+            output.get_mutable_value(),
+        )  # fmt: skip
 
     def _calc_wheel_state(self, context, output):
         output.SetFromVector(self._cached(context).state.ravel())
