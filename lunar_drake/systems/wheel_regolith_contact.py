@@ -55,7 +55,7 @@ class _Kinematics(NamedTuple):
 
 
 class _Contact(NamedTuple):
-    """Stage 2: the forces with the patch state (the outputs' cache entry's value)."""
+    """Stage 2: the forces with the patch state (what the outputs are computed from)."""
 
     F6: np.ndarray  # (n, 6) [moment about each wheel centre, force on it], world
     state: np.ndarray  # (n, len(WHEEL_STATE_FIELDS)) wheel_state rows
@@ -102,10 +102,11 @@ class WheelRegolithContact(Leaf):
     ``patch.dynamic_speed_mps`` the Wong-Reece forces, blended smoothly in between; the
     ``drawbar_pull_N`` column is the blended net force along the wheel heading.
 
-    The evaluation is cached in two stages so that the footprint geometry and the
+    The evaluation is split in two stages so that the footprint geometry and the
     Wong-Reece forces are computed once per step: the kinematics (everything but the
-    patch force; from the inputs and the soil), read by the patch update, and the forces
-    (kinematics plus patch state), read by the outputs. Drake's discrete MultibodyPlant
+    patch force; from the inputs and the soil), cached and read by the patch update and
+    the outputs, and the forces (kinematics plus patch state), computed by each output
+    (the plant reads one of them each step). Drake's discrete MultibodyPlant
     (with sampled output ports, the default) steps in an unrestricted update, which the
     Simulator applies before discrete updates; so the patch update sees the plant's new
     state (a semi-implicit step of ``j``) and evaluates the kinematics that the next
@@ -229,9 +230,9 @@ class WheelRegolithContact(Leaf):
             "heightfield",
             AbstractValue.Make(Heightfield.from_array(np.zeros((4, 4)), resolution_m=1.0)),
         )
-        # One contact evaluation per step, in two cached stages: the kinematics (geometry,
-        # loads, slip, Wong-Reece forces; from the inputs and the soil), shared by the patch
-        # update, and the forces (kinematics + patch state), shared by the three outputs.
+        # One contact evaluation per step, in two stages: the kinematics (geometry, loads,
+        # slip, Wong-Reece forces; from the inputs and the soil), cached and shared by the
+        # patch update and the outputs, and the forces (kinematics + patch state).
         # Drake's discrete plant (sampled output ports) steps in an unrestricted update,
         # which the Simulator applies before discrete updates: the patch update therefore
         # sees the plant's new state and computes the kinematics that the next step's
@@ -249,19 +250,14 @@ class WheelRegolithContact(Leaf):
                 soil_ticket,
             },
         )
-        self._cache = self.DeclareCacheEntry(
-            description="wheel-soil contact forces",
-            value_producer=ValueProducer(
-                allocate=lambda: AbstractValue.Make(None),
-                calc=lambda context, out: out.set_value(self._compute(context)),
-            ),
-            prerequisites_of_calc={
-                self._kinematics.ticket(),
-                self.discrete_state_ticket(DiscreteStateIndex(self._patch_index)),
-                soil_ticket,
-            },
-        )
-        cached = {self._cache.ticket()}
+        # Stage 2 (the forces with the patch state) is cheap and each output computes it
+        # from the cached stage 1: the plant reads one force output per step, the rest
+        # (wheel_state for logs) far less often.
+        cached = {
+            self._kinematics.ticket(),
+            self.discrete_state_ticket(DiscreteStateIndex(self._patch_index)),
+            soil_ticket,
+        }
         self.spatial_forces_output = self.DeclareAbstractOutputPort(
             "spatial_forces",
             lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
@@ -275,7 +271,10 @@ class WheelRegolithContact(Leaf):
             prerequisites_of_calc=cached,
         )
         self.off_terrain_output = self.DeclareVectorOutputPort(
-            "off_terrain", BasicVector(1), self._calc_off_terrain, prerequisites_of_calc=cached
+            "off_terrain",
+            BasicVector(1),
+            self._calc_off_terrain,
+            prerequisites_of_calc={self._kinematics.ticket()},
         )
         self.generalized_force_output = None
         if tree is not None:
@@ -286,7 +285,7 @@ class WheelRegolithContact(Leaf):
                 BasicVector(tree.nv),
                 self._calc_generalized_force,
                 prerequisites_of_calc={
-                    self._cache.ticket(),
+                    *cached,
                     self.input_port_ticket(self.plant_state_input.get_index()),
                 },
             )
@@ -425,9 +424,6 @@ class WheelRegolithContact(Leaf):
         F6, state = ck.step_forces(k.values, self._n, k.on, j, k.const)
         return _Contact(F6, state, k.belly, k.off)
 
-    def _cached(self, context) -> _Contact:
-        return self._cache.Eval(context)
-
     def _update_patch(self, context, discrete_state):
         k = self._kinematics.Eval(context)
         j = context.get_discrete_state(self._patch_index).value().reshape(self._n, 2)
@@ -436,7 +432,7 @@ class WheelRegolithContact(Leaf):
         discrete_state.get_mutable_vector(self._patch_index).SetFromVector(jn.ravel())
 
     def _calc_forces(self, context, output):
-        c = self._cached(context)
+        c = self._compute(context)
         # The ExternallyAppliedSpatialForce objects are scratch: set_value copies them.
         forces = self._force_buffer
         for k, e in enumerate(forces[: self._n]):
@@ -449,7 +445,7 @@ class WheelRegolithContact(Leaf):
         output.set_value(forces)
 
     def _calc_generalized_force(self, context, output):
-        c = self._cached(context)
+        c = self._compute(context)
         F = self._F_W
         F[: self._n] = c.F6
         if self._belly is not None:
@@ -464,7 +460,7 @@ class WheelRegolithContact(Leaf):
         )  # fmt: skip
 
     def _calc_wheel_state(self, context, output):
-        output.SetFromVector(self._cached(context).state.ravel())
+        output.SetFromVector(self._compute(context).state.ravel())
 
     def _calc_off_terrain(self, context, output):
-        output.SetFromVector([1.0 if self._cached(context).off else 0.0])
+        output.SetFromVector([1.0 if self._kinematics.Eval(context).off else 0.0])
