@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from lunar_drake.autonomy.commands import ExecutorState, GotoCommand, executor_step
-from lunar_drake.autonomy.follower import aim_point, follow_step
+from lunar_drake.autonomy.follower import FollowerParams, aim_point, follow_step
 from lunar_drake.comms.messages import Delivery, Message
+from lunar_drake.errors import ConfigError
 
 
 def test_pure_pursuit_aims_ahead_turns_in_place_and_stops_at_the_goal():
@@ -29,6 +30,24 @@ def test_pure_pursuit_aims_ahead_turns_in_place_and_stops_at_the_goal():
     assert tw[0] == 0.0 and abs(tw[2]) == pytest.approx(0.2)
     tw, _, done = follow_step((10.1, 9.7, 1.0), wp, 1, speed_mps=0.2, tolerance_m=0.5)
     assert done and np.all(tw == 0.0)
+
+
+def test_pure_pursuit_arc_and_crab_by_hand():
+    """The compiled step against the law worked out by hand: 0.5 m right of the first
+    leg, the aim is where the 1.5 m circle meets it, (2 + sqrt(2), 0)."""
+    wp = [(0.0, 0.0), (10.0, 0.0), (10.0, 10.0)]
+    alpha = math.atan2(0.5, math.sqrt(2.0))
+    v = 0.2 * math.cos(alpha)
+    wz = min(2.0 * v * math.sin(alpha) / 1.5, 0.2)
+    tw, k, done = follow_step((2.0, -0.5, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.5)
+    assert (k, done) == (0, False)
+    assert tw == pytest.approx([v, 0.0, wz], rel=1e-12)
+    # Crabbing back: -gain x (cross-track -0.5 m), at most half the forward speed.
+    crab = FollowerParams(crab_gain_per_s=0.3)
+    tw, _, _ = follow_step((2.0, -0.5, 0.0), wp, 0, speed_mps=0.2, tolerance_m=0.5, params=crab)
+    assert tw == pytest.approx([v, min(0.3 * 0.5, 0.5 * v), wz], rel=1e-12)
+    with pytest.raises(ConfigError, match=r"waypoints have shape \(3,\)"):
+        follow_step((0.0, 0.0, 0.0), [1.0, 2.0, 3.0], 0, speed_mps=0.2, tolerance_m=0.5)
 
 
 def test_executor_runs_a_goto_until_the_estimate_is_at_the_goal_then_the_next():

@@ -185,31 +185,52 @@ def follow_step(pose, waypoints, index: int, *, speed_mps: float, tolerance_m: f
     params = params or FollowerParams()
     x, y, yaw = float(pose[0]), float(pose[1]), float(pose[2])
     wp = np.ascontiguousarray(waypoints, dtype=float)
+    if wp.ndim != 2 or wp.shape[0] < 1 or wp.shape[1] != 2:
+        raise ConfigError(f"waypoints have shape {wp.shape}; a path of (n >= 1, 2) is required")
+    p = params
+    if p.heading != "sun" or sun_azimuth_rad is None:
+        vx, vy, wz, index, done = _path_step(
+            x, y, yaw, wp, int(index), float(speed_mps), float(tolerance_m),
+            float(p.lookahead_m), float(p.turn_in_place_rad), float(p.max_wz_radps),
+            float(p.min_speed_fraction), float(p.crab_gain_per_s), float(p.max_crab_fraction),
+        )  # fmt: skip
+        return np.array([vx, vy, wz]), index, done
     if math.hypot(wp[-1, 0] - x, wp[-1, 1] - y) <= tolerance_m:
         return np.zeros(3), len(wp) - 1, True
-    ax, ay, index = _aim_point(x, y, wp, int(index), float(params.lookahead_m))
+    ax, ay, index = _aim_point(x, y, wp, int(index), float(p.lookahead_m))
+    dx, dy = ax - x, ay - y
+    leg = wp[min(index + 1, len(wp) - 1)] - wp[index]
+    leg_rad = math.atan2(leg[1], leg[0]) if np.any(leg != 0.0) else math.atan2(dy, dx)
+    twist = _sun_step(p, yaw, math.atan2(dy, dx), leg_rad, float(sun_azimuth_rad), speed_mps)
+    return twist, index, False
+
+
+@numba.njit(cache=True)
+def _path_step(x, y, yaw, wp, index, speed_mps, tolerance_m, lookahead_m, turn_in_place_rad,
+               max_wz_radps, min_speed_fraction, crab_gain_per_s,
+               max_crab_fraction):  # pragma: no cover  # fmt: skip
+    """The ``path`` policy's step of :func:`follow_step`, compiled:
+    (vx, vy, wz, new index, done)."""
+    n = wp.shape[0]
+    if math.hypot(wp[n - 1, 0] - x, wp[n - 1, 1] - y) <= tolerance_m:
+        return 0.0, 0.0, 0.0, n - 1, True
+    ax, ay, index = _aim_point(x, y, wp, index, lookahead_m)
     dx, dy = ax - x, ay - y
     d = max(math.hypot(dx, dy), 1e-6)
-    if params.heading == "sun" and sun_azimuth_rad is not None:
-        leg = wp[min(index + 1, len(wp) - 1)] - wp[index]
-        leg_rad = math.atan2(leg[1], leg[0]) if np.any(leg != 0.0) else math.atan2(dy, dx)
-        twist = _sun_step(params, yaw, math.atan2(dy, dx), leg_rad, float(sun_azimuth_rad),
-                          speed_mps)  # fmt: skip
-        return twist, index, False
-    alpha = _wrap(math.atan2(dy, dx) - yaw)
-    if abs(alpha) > params.turn_in_place_rad:
-        return np.array([0.0, 0.0, math.copysign(params.max_wz_radps, alpha)]), index, False
-    v = speed_mps * max(math.cos(alpha), params.min_speed_fraction)
+    alpha = (math.atan2(dy, dx) - yaw + math.pi) % (2.0 * math.pi) - math.pi  # _wrap
+    if abs(alpha) > turn_in_place_rad:
+        return 0.0, 0.0, math.copysign(max_wz_radps, alpha), index, False
+    v = speed_mps * max(math.cos(alpha), min_speed_fraction)
     wz = 2.0 * v * math.sin(alpha) / d
-    wz = max(-params.max_wz_radps, min(params.max_wz_radps, wz))
+    wz = max(-max_wz_radps, min(max_wz_radps, wz))
     vy = 0.0
-    if params.crab_gain_per_s > 0.0 and len(wp) >= 2:
-        e, heading = cross_track((x, y), wp)
+    if crab_gain_per_s > 0.0 and n >= 2:
+        e, heading = _cross_track(x, y, wp)
         # The path's left normal in the body frame (its y component).
         ny = math.cos(heading - yaw)
-        lim = params.max_crab_fraction * v
-        vy = max(-lim, min(lim, -params.crab_gain_per_s * e * ny))
-    return np.array([v, vy, wz]), index, False
+        lim = max_crab_fraction * v
+        vy = max(-lim, min(lim, -crab_gain_per_s * e * ny))
+    return v, vy, wz, index, False
 
 
 def _sun_step(params: FollowerParams, yaw: float, course: float, leg: float,
