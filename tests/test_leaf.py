@@ -1,4 +1,5 @@
-"""Leaf: the base of our systems, without pydrake's per-step witness-function lookup."""
+"""Leaf: the base of our systems, without pydrake's per-step witness-function lookup, and
+its own-context lookup."""
 
 from __future__ import annotations
 
@@ -7,8 +8,14 @@ import inspect
 import pkgutil
 
 import numpy as np
+import pytest
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import LeafSystem, PublishEvent, WitnessFunctionDirection
+from pydrake.systems.framework import (
+    DiagramBuilder,
+    LeafSystem,
+    PublishEvent,
+    WitnessFunctionDirection,
+)
 
 import lunar_drake.systems as systems_pkg
 from lunar_drake.systems.leaf import Leaf
@@ -95,3 +102,19 @@ def test_every_system_of_the_package_is_a_leaf():
         ]
     assert len(classes) >= 30
     assert [c.__name__ for c in classes if not issubclass(c, Leaf)] == []
+
+
+def test_own_context_from_its_own_or_the_root_and_not_from_another():
+    builder = DiagramBuilder()
+    inner = DiagramBuilder()
+    a = inner.AddSystem(Leaf())
+    sub = builder.AddSystem(inner.Build())
+    b = builder.AddSystem(Leaf())
+    root = builder.Build().CreateDefaultContext()
+    own_a = a.GetMyContextFromRoot(root)
+    assert a.own_context(own_a) is own_a and a.own_mutable_context(own_a) is own_a
+    assert a.own_context(root) is own_a and a.own_mutable_context(root) is own_a
+    with pytest.raises(RuntimeError, match=r"[Cc]ontext"):
+        a.own_context(b.GetMyContextFromRoot(root))  # another system's
+    with pytest.raises(RuntimeError, match="root"):
+        a.own_context(sub.GetMyContextFromRoot(root))  # a subdiagram's, not the root

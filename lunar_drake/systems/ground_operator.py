@@ -180,18 +180,10 @@ class GroundOperator(Leaf):
     # ------------------------------------------------------------------------ internals
 
     def _own(self, context):
-        try:
-            return self.GetMyContextFromRoot(context)
-        except RuntimeError:
-            self.ValidateContext(context)  # this system's own context, or an error
-            return context
+        return self.own_context(context)
 
     def _request(self, context, request: Request) -> None:
-        try:
-            own = self.GetMyMutableContextFromRoot(context)
-        except RuntimeError:
-            self.ValidateContext(context)
-            own = context
+        own = self.own_mutable_context(context)
         st, k, reqs = own.get_abstract_state(self._state).get_value()
         own.get_mutable_abstract_state(self._state).set_value((st, k, (*reqs, request)))
 

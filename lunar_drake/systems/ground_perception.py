@@ -137,12 +137,7 @@ class GroundPerception(Leaf):
     def perception_state(self, context) -> PerceptionState:
         """The PerceptionState (this system's context or the root's): keyframe records,
         the elevation map, the merged costmap."""
-        try:
-            own = self.GetMyContextFromRoot(context)
-        except RuntimeError:
-            self.ValidateContext(context)
-            own = context
-        return own.get_abstract_state(self._state).get_value()
+        return self.own_context(context).get_abstract_state(self._state).get_value()
 
     def _update(self, context, state):
         t = context.get_time()

@@ -17,11 +17,15 @@ functions) without touching Python. A subclass that declares witness functions o
 ``DoGetWitnessFunctions`` in Python as usual, in the class itself or a base ahead of
 :class:`Leaf` in its MRO; pybind11 then finds and calls that. (An override set on an
 instance after the class's first lookup, or in a mixin listed after Leaf, is not seen.)
+
+:meth:`Leaf.own_context` gives a system's own context from its own or the root's without
+the C++ exception that ``GetMyContextFromRoot`` throws for a system's own context
+(about 14 us a call, 70 us inside a running simulation).
 """
 
 from __future__ import annotations
 
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import LeafContext, LeafSystem
 
 __all__ = ["Leaf"]
 
@@ -32,3 +36,19 @@ class Leaf(LeafSystem):
 
     #: a bound C++ function under the trampoline's name: pybind11 caches "not overridden"
     DoGetWitnessFunctions = LeafSystem.GetWitnessFunctions
+
+    def own_context(self, context):
+        """This system's context: ``context`` itself when it is a leaf context (checked to
+        be this system's: ``ValidateContext`` raises otherwise), else this system's
+        subcontext of the root ``context``."""
+        if isinstance(context, LeafContext):
+            self.ValidateContext(context)
+            return context
+        return self.GetMyContextFromRoot(context)
+
+    def own_mutable_context(self, context):
+        """:meth:`own_context`, mutable."""
+        if isinstance(context, LeafContext):
+            self.ValidateContext(context)
+            return context
+        return self.GetMyMutableContextFromRoot(context)
