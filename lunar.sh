@@ -55,6 +55,14 @@ web_deps() {
   echo "$want" > "$stamp"
 }
 
+malloc_tunables() {
+  # glibc's malloc cache raised for everything the tests start (lunar_drake/allocator.py;
+  # lunar-drake and the benchmarks do it themselves): unless set already or opted out
+  local t
+  t="$("$venv/bin/python" -c 'import os; from lunar_drake.allocator import tunables_to_set as t; print(t(os.environ) or "")')"
+  if [ -n "$t" ]; then export GLIBC_TUNABLES="$t"; fi
+}
+
 browser_deps() {
   # Debian's Chromium for the real-browser tests (Playwright drives it; no browser download).
   if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then
@@ -106,6 +114,7 @@ case "$cmd" in
   test)
     setup
     browser_deps
+    malloc_tunables
     "$venv/bin/ruff" check lunar_drake tests benchmarks
     exec "$venv/bin/python" -m pytest -q "$@" ;;
   *) setup; exec "$venv/bin/lunar-drake" "$cmd" "$@" ;;

@@ -6,6 +6,11 @@ lower is faster. Machines here differ by up to 3x from day to day, so every benc
 JSON records it, measured in the same process tree (a child of the benchmark), to make
 figures from different days comparable. Without the script the index is None and the
 reason is recorded.
+
+The index is measured with glibc's default allocator settings (``GLIBC_TUNABLES``
+removed from the child's environment), as on the days before
+:mod:`lunar_drake.allocator`; the benchmark's own setting is recorded beside it
+(``glibc_tunables``).
 """
 
 from __future__ import annotations
@@ -26,14 +31,17 @@ def script_path() -> Path:
 
 def measure_speed_index(*, repeats: int = 3) -> dict:
     """Runs the script in a child process: ``{"speed_index_s": s or None, "parts": {...},
-    "script": path}`` (``"error"`` says why when the index is None)."""
+    "script": path, "glibc_tunables": this process's GLIBC_TUNABLES or None}``
+    (``"error"`` says why when the index is None)."""
     path = script_path()
-    out: dict = {"speed_index_s": None, "parts": {}, "script": str(path)}
+    out: dict = {"speed_index_s": None, "parts": {}, "script": str(path),
+                 "glibc_tunables": os.environ.get("GLIBC_TUNABLES")}  # fmt: skip
     if not path.is_file():
         out["error"] = f"{path} not found (set LUNAR_DRAKE_SPEED_INDEX)"
         return out
+    env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
     proc = subprocess.run([sys.executable, str(path), "--repeats", str(int(repeats))],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+                          capture_output=True, text=True, check=False, env=env)  # fmt: skip
     try:
         res = json.loads(proc.stdout.strip().splitlines()[-1])
         out["speed_index_s"] = float(res["speed_index_s"])

@@ -106,7 +106,11 @@ def run() -> None:
     """The ``lunar-drake`` program: :func:`main`, then exit with its status. After Ctrl-C
     or SIGTERM it exits at once (streams flushed) instead of finalizing the interpreter: an
     extension interrupted mid-import (Open3D) can otherwise fail at exit and turn 130
-    into 1, or re-raise the interrupt."""
+    into 1, or re-raise the interrupt. It first starts itself again, once, with glibc's
+    malloc cache raised (:mod:`lunar_drake.allocator`)."""
+    from lunar_drake.allocator import reexec_with_malloc_tunables
+
+    reexec_with_malloc_tunables()
     from lunar_drake import interrupts
 
     sigterm = interrupts.TermAsInterrupt()  # the program's only: main() from Python keeps
