@@ -126,16 +126,26 @@ def body_kinematics_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB, X_
                            axis_F, x, bodies, X_out, V_out):  # pragma: no cover  # fmt: skip
     """:func:`body_kinematics` compiled: ``*kernel_args(tree), x, bodies, X_out, V_out``
     (``x`` float64 (nq + nv,), ``bodies`` int64; no checks)."""
+    X, V, _, _ = _all_frames(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld,
+                             axis_F, x)  # fmt: skip
+    for k in range(bodies.shape[0]):
+        X_out[k] = X[bodies[k]]
+        V_out[k] = V[bodies[k]]
+
+
+@numba.njit(cache=True, inline="always")
+def _all_frames(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
+                x):  # pragma: no cover  # fmt: skip
+    """``(X, V, X_WF, X_WM)`` of every body (and its joint) from the state ``x``
+    (:func:`_tree_kinematics` into new arrays)."""
     nb = parent.shape[0]
-    X = np.zeros((nb, 3, 4))
-    V = np.zeros((nb, 6))
+    X = np.empty((nb, 3, 4))
+    V = np.empty((nb, 6))
     X_WF = np.empty((nb, 3, 4))
     X_WM = np.empty((nb, 3, 4))
     _tree_kinematics(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
                      x, X, V, X_WF, X_WM)  # fmt: skip
-    for k in range(bodies.shape[0]):
-        X_out[k] = X[bodies[k]]
-        V_out[k] = V[bodies[k]]
+    return X, V, X_WF, X_WM
 
 
 @numba.njit(cache=True, inline="always")
@@ -250,13 +260,8 @@ def generalized_forces_kernel(order, parent, kind, q_start, v_index, X_PF, X_MB,
     tau_out`` (no checks). Each force is carried down the path from its body to the
     world: at each joint, its moment about the joint's origin M, projected on what the
     joint lets move."""
-    nb = parent.shape[0]
-    X = np.empty((nb, 3, 4))
-    V = np.empty((nb, 6))
-    X_WF = np.empty((nb, 3, 4))
-    X_WM = np.empty((nb, 3, 4))
-    _tree_kinematics(order, parent, kind, q_start, v_index, X_PF, X_MB, X_FM_weld, axis_F,
-                     x, X, V, X_WF, X_WM)  # fmt: skip
+    X, _, X_WF, X_WM = _all_frames(order, parent, kind, q_start, v_index, X_PF, X_MB,
+                                   X_FM_weld, axis_F, x)  # fmt: skip
     v0 = x.shape[0] - tau_out.shape[0]  # v_index is into x = [q, v]
     tau_out[:] = 0.0
     for k in range(bodies.shape[0]):
