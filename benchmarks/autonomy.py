@@ -220,9 +220,9 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from lunar_drake.allocator import reexec_with_malloc_tunables
+    from lunar_drake.allocator import reexec_or_exit
 
-    reexec_with_malloc_tunables()  # as the lunar-drake program runs (lunar_drake/allocator.py)
+    reexec_or_exit("autonomy.py")  # as the lunar-drake program runs (lunar_drake/allocator.py)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from benchmarks import run_main
 

@@ -117,7 +117,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from lunar_drake.allocator import reexec_with_malloc_tunables
+    from lunar_drake.allocator import reexec_or_exit
 
-    reexec_with_malloc_tunables()  # as the lunar-drake program runs (lunar_drake/allocator.py)
+    reexec_or_exit("mission_rate.py")  # as the lunar-drake program runs (lunar_drake/allocator.py)
     sys.exit(main())

@@ -374,9 +374,9 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from lunar_drake.allocator import reexec_with_malloc_tunables
+    from lunar_drake.allocator import reexec_or_exit
 
-    reexec_with_malloc_tunables()  # as the lunar-drake program runs (lunar_drake/allocator.py)
+    reexec_or_exit("step_budget.py")  # as the lunar-drake program runs (lunar_drake/allocator.py)
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     from benchmarks import run_main
 

@@ -26,9 +26,12 @@ import os
 import platform
 import sys
 
+from lunar_drake.errors import ConfigError
+
 __all__ = [
     "TCACHE_COUNT",
     "TCACHE_TUNABLE",
+    "reexec_or_exit",
     "reexec_with_malloc_tunables",
     "tunables_to_set",
     "with_tcache",
@@ -37,8 +40,9 @@ __all__ = [
 #: Freed blocks glibc keeps per size class and thread (its default is 7).
 TCACHE_COUNT = 1000
 TCACHE_TUNABLE = "glibc.malloc.tcache_count"
-#: ``LUNAR_DRAKE_MALLOC=default`` keeps glibc's defaults.
+#: ``LUNAR_DRAKE_MALLOC``: ``tuned`` (or unset) raises the cache, ``default`` keeps glibc's.
 OPT_OUT_ENV = "LUNAR_DRAKE_MALLOC"
+MALLOC_CHOICES = ("tuned", "default")
 
 
 def with_tcache(tunables: str | None, *, count: int = TCACHE_COUNT) -> str | None:
@@ -53,8 +57,14 @@ def with_tcache(tunables: str | None, *, count: int = TCACHE_COUNT) -> str | Non
 
 def tunables_to_set(environ) -> str | None:
     """The ``GLIBC_TUNABLES`` value a process with environment ``environ`` should start
-    with, or None to leave it as it is (not glibc, already set, opted out)."""
-    if environ.get(OPT_OUT_ENV, "").strip().lower() == "default":
+    with, or None to leave it as it is (not glibc, already set, opted out). Raises
+    ConfigError for a ``LUNAR_DRAKE_MALLOC`` other than ``tuned`` or ``default``."""
+    choice = environ.get(OPT_OUT_ENV, "").strip().lower() or "tuned"
+    if choice not in MALLOC_CHOICES:
+        raise ConfigError(
+            f"{OPT_OUT_ENV} = {environ[OPT_OUT_ENV]!r}; choose one of {list(MALLOC_CHOICES)}"
+        )
+    if choice == "default":
         return None
     if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
         return None
@@ -79,3 +89,13 @@ def reexec_with_malloc_tunables(*, environ=None, execv=None) -> bool:
     except OSError:
         return False
     return True  # only with a test's execv
+
+
+def reexec_or_exit(prog: str) -> None:
+    """:func:`reexec_with_malloc_tunables` for a program's first line: a bad
+    ``LUNAR_DRAKE_MALLOC`` is one line on stderr and exit status 2."""
+    try:
+        reexec_with_malloc_tunables()
+    except ConfigError as exc:
+        print(f"{prog}: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        sys.exit(2)

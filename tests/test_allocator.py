@@ -16,6 +16,7 @@ from lunar_drake.allocator import (
     tunables_to_set,
     with_tcache,
 )
+from lunar_drake.errors import ConfigError
 
 ON_GLIBC = sys.platform == "linux" and platform.libc_ver()[0] == "glibc"
 
@@ -62,3 +63,22 @@ def test_a_real_process_starts_again_with_it_and_its_output_and_status_survive()
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert proc.returncode == 3, proc.stderr
     assert proc.stdout.splitlines() == ["start", f"glibc.malloc.tcache_count={TCACHE_COUNT}"]
+
+
+def test_an_unknown_choice_is_refused_in_one_line_with_status_2():
+    with pytest.raises(ConfigError, match=r"LUNAR_DRAKE_MALLOC = 'fast'; choose one of"):
+        tunables_to_set({"LUNAR_DRAKE_MALLOC": "fast"})
+    assert tunables_to_set({"LUNAR_DRAKE_MALLOC": "tuned", "GLIBC_TUNABLES": "a=1"}) in (
+        None,  # not glibc
+        f"a=1:glibc.malloc.tcache_count={TCACHE_COUNT}",
+    )
+    env = {**os.environ, "LUNAR_DRAKE_MALLOC": "fast"}
+    env.pop("GLIBC_TUNABLES", None)
+    proc = subprocess.run(
+        [sys.executable, "-m", "lunar_drake.cli", "--help"], env=env, capture_output=True, text=True
+    )
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.strip().splitlines() == [
+        "lunar-drake: error: ConfigError: LUNAR_DRAKE_MALLOC = 'fast'; choose one of "
+        "['tuned', 'default']"
+    ]

@@ -139,6 +139,8 @@ def test_wrong_sizes_and_bodies_are_refused():
         generalized_forces(tree, x, [1], np.zeros((1, 6)), np.empty(2))
     with pytest.raises(ConfigError, match=r"bodies \[99\]: a body index is 0\.\."):
         generalized_forces(tree, x, [99], np.zeros((1, 6)), tau)
+    with pytest.raises(ConfigError, match=r"forces have 1 non-finite value"):
+        generalized_forces(tree, x, [1], np.array([[0, 0, 0, np.nan, 0, 0.0]]), tau)
     d = rover.description
     with pytest.raises(ConfigError, match=r"bodies \[\d+, -1\]: a BodyIndex of the tree"):
         WheelRegolithContact(

@@ -108,9 +108,9 @@ def run() -> None:
     extension interrupted mid-import (Open3D) can otherwise fail at exit and turn 130
     into 1, or re-raise the interrupt. It first starts itself again, once, with glibc's
     malloc cache raised (:mod:`lunar_drake.allocator`)."""
-    from lunar_drake.allocator import reexec_with_malloc_tunables
+    from lunar_drake.allocator import reexec_or_exit
 
-    reexec_with_malloc_tunables()
+    reexec_or_exit("lunar-drake")
     from lunar_drake import interrupts
 
     sigterm = interrupts.TermAsInterrupt()  # the program's only: main() from Python keeps

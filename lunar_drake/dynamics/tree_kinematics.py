@@ -241,7 +241,8 @@ def generalized_forces(tree: TreeKinematics, x, bodies, F_W, tau_out) -> None:
     MultibodyPlant applies for the same forces on its ``applied_spatial_force`` port.
     A revolute joint takes the moment about its origin along its axis; a floating
     joint the moment and force, expressed in its frame F. Raises ConfigError as
-    :func:`body_kinematics` does, or for forces or an output of the wrong shape."""
+    :func:`body_kinematics` does, or for forces or an output of the wrong shape, or
+    forces not finite."""
     x, bodies = _checked(tree, x, bodies)
     m = len(bodies)
     F_W = np.asarray(F_W, dtype=np.float64)
@@ -250,6 +251,9 @@ def generalized_forces(tree: TreeKinematics, x, bodies, F_W, tau_out) -> None:
             f"forces of shape {F_W.shape} and output of shape {np.shape(tau_out)}; "
             f"{m} bodies need ({m}, 6) and ({tree.nv},)"
         )
+    bad = int(np.count_nonzero(~np.isfinite(F_W)))
+    if bad:
+        raise ConfigError(f"forces have {bad} non-finite value(s); forces must be finite")
     generalized_forces_kernel(*kernel_args(tree), x, bodies, np.ascontiguousarray(F_W), tau_out)
 
 
