@@ -1,6 +1,7 @@
 """The fast Hapke camera engine: DEM ray marching, the reflectance table, rover pixels,
 and agreement with the Embree reference engine."""
 
+import dataclasses as dc
 import functools
 import math
 
@@ -142,6 +143,65 @@ def test_trace_agrees_with_embree_from_outside_and_near_the_edges(p, yaw):
     both = np.isfinite(te) & np.isfinite(tr.t)
     rel = np.abs(tr.t[both] - te[both]) / te[both]
     assert np.median(rel) < 2e-3 and np.quantile(rel, 0.95) < 0.03
+
+
+def _ridged(n=300, res=0.1, seed=3):
+    """Rolling ground, a berm across it, a crater-like dip and scattered boulders:
+    stretches hidden behind crests (odd size: the pyramid pads rows and columns)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:n, 0 : n + 7] * res
+    z = 0.4 * np.sin(xx / 2.1) + 0.25 * np.cos(yy / 1.3 + xx / 3.0)
+    z -= 1.5 * np.exp(-((xx - 20.0) ** 2 + (yy - 12.0) ** 2) / 18.0)
+    z += 1.2 * np.exp(-((xx - 14.0) ** 2) / 0.8)  # a berm across the site
+    for _ in range(60):
+        cx_, cy_ = rng.uniform(0, xx.max()), rng.uniform(0, yy.max())
+        z += rng.uniform(0.1, 0.6) * np.exp(-((xx - cx_) ** 2 + (yy - cy_) ** 2) / 0.05)
+    return Heightfield.from_array(z.astype(np.float32), resolution_m=res)
+
+
+def test_the_max_pyramid_bounds_every_level_0_sample_it_covers():
+    hf = _ridged(n=75)
+    pyr = DemPyramid.from_heightfield(hf)
+    z0 = pyr.data[: pyr.heights[0] * pyr.widths[0]].reshape(pyr.heights[0], pyr.widths[0])
+    for lev in range(pyr.levels):
+        h, w = int(pyr.heights[lev]), int(pyr.widths[lev])
+        o = int(pyr.offsets[lev])
+        mx = pyr.max_data[o : o + h * w].reshape(h, w)
+        mean = pyr.data[o : o + h * w].reshape(h, w)
+        s = 2**lev
+        for r in range(h):
+            for c in range(w):
+                block = z0[r * s : (r + 1) * s, c * s : (c + 1) * s]
+                assert mx[r, c] == block.max()  # exactly the highest sample it covers
+        assert (mx >= mean).all()  # and so never below the mean level's cell
+
+
+@pytest.mark.parametrize(
+    ("p", "yaw", "tilt", "roll", "hidden"),
+    [
+        ([-10.0, 0.5, 0.6], 10.0, 8.0, 0.0, 0.3),  # low, the berm ahead hides the ground
+        ([3.0, -4.0, 1.5], 200.0, -5.0, 12.0, 0.1),  # rolled, looking up over the berm
+        ([-14.0, 9.0, 6.0], -40.0, 25.0, -8.0, 0.0),  # high: it sees nearly everything
+        ([-25.0, 0.0, 2.0], 0.0, 10.0, 0.0, 0.0),  # outside the DEM: the general march
+    ],
+)
+def test_hidden_profile_stretches_are_skipped_without_changing_a_hit(p, yaw, tilt, roll, hidden):
+    hf = _ridged()
+    pyr = DemPyramid.from_heightfield(hf)
+    cam = _cam(w=320, h=240)
+    z = float(pyr.height(p[0], p[1])[0]) if abs(p[0]) < 15 else 0.0
+    X = _pose([p[0], p[1], z + p[2]], yaw_deg=yaw, tilt_deg=tilt, roll_deg=roll)
+    fast = _trace(pyr, cam, X)
+    full = _trace(pyr, cam, X, skip_hidden=False)
+    assert full.skipped == 0 and fast.samples == full.samples
+    np.testing.assert_array_equal(fast.t, full.t)  # to the bit
+    np.testing.assert_array_equal(fast.level, full.level)
+    assert np.isfinite(fast.t).mean() > 0.3
+    assert fast.skipped >= hidden * fast.samples  # stretches behind the berm: skipped
+    # a pyramid without the max levels reads every sample, the same hits
+    plain = _trace(dc.replace(pyr, max_data=None), cam, X)
+    assert plain.skipped == 0
+    np.testing.assert_array_equal(plain.t, full.t)
 
 
 def test_camera_below_the_surface_and_bad_options_raise():

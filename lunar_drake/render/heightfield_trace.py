@@ -55,6 +55,9 @@ class DemPyramid:
         offsets, heights, widths: (L,) int64 start, rows and columns of each level.
         cell_x, cell_y: (L,) float64 cell sizes of each level (m).
         bounds: (left, bottom, right, top) of level 0 (site m).
+        max_data: float32 max-pooled levels, the same layout as ``data``: each cell the
+            highest level-0 sample it covers (an upper bound of the mean levels too),
+            used to skip profile samples that cannot be seen; None: no skipping.
     """
 
     data: np.ndarray
@@ -64,6 +67,7 @@ class DemPyramid:
     cell_x: np.ndarray
     cell_y: np.ndarray
     bounds: tuple[float, float, float, float]
+    max_data: np.ndarray | None = None
 
     @classmethod
     def build(cls, z, *, bounds, min_size: int = 4) -> DemPyramid:
@@ -78,17 +82,20 @@ class DemPyramid:
         if not (right > left and top > bottom):
             raise OutOfRangeError(f"bounds = {bounds!r} is empty; need right > left, top > bottom")
         levels = [z0]
+        highs = [z0]
         cx = [(right - left) / z0.shape[1]]
         cy = [(top - bottom) / z0.shape[0]]
         while min(levels[-1].shape) > min_size:
-            a = levels[-1]
-            if a.shape[0] % 2:
-                a = np.concatenate([a, a[-1:]], axis=0)
-            if a.shape[1] % 2:
-                a = np.concatenate([a, a[:, -1:]], axis=1)
+            a, hi = _even(levels[-1]), _even(highs[-1])
             a = a.astype(np.float64)
             m = 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
             levels.append(m.astype(np.float32))
+            highs.append(
+                np.maximum(
+                    np.maximum(hi[0::2, 0::2], hi[1::2, 0::2]),
+                    np.maximum(hi[0::2, 1::2], hi[1::2, 1::2]),
+                )
+            )
             cx.append(2.0 * cx[-1])
             cy.append(2.0 * cy[-1])
         sizes = np.array([lv.size for lv in levels], np.int64)
@@ -101,6 +108,7 @@ class DemPyramid:
             cell_x=np.array(cx, np.float64),
             cell_y=np.array(cy, np.float64),
             bounds=(left, bottom, right, top),
+            max_data=np.concatenate([hi.reshape(-1) for hi in highs]),
         )
 
     @classmethod
@@ -141,6 +149,15 @@ class DemPyramid:
         )
 
 
+def _even(a: np.ndarray) -> np.ndarray:
+    """``a`` with its last row / column repeated where the count is odd."""
+    if a.shape[0] % 2:
+        a = np.concatenate([a, a[-1:]], axis=0)
+    if a.shape[1] % 2:
+        a = np.concatenate([a, a[:, -1:]], axis=1)
+    return a
+
+
 @dataclass(frozen=True)
 class TraceResult:
     """Per-pixel first hits on the DEM (row-major ``height x width``).
@@ -150,6 +167,8 @@ class TraceResult:
         level: (H*W,) int8 mip level that decided the hit (-1 = none).
         bins, steps: azimuth bins and distance samples of this frame's profiles.
         R_WC: camera orientation. intrinsics: (fx, fy, cx, cy, width, height).
+        samples: profile samples of all bins (each bin up to where it leaves the DEM);
+            skipped: those of them proven hidden and not read (``skip_hidden``).
     """
 
     t: np.ndarray
@@ -158,6 +177,8 @@ class TraceResult:
     steps: int
     R_WC: np.ndarray
     intrinsics: tuple
+    samples: int = 0
+    skipped: int = 0
 
     def directions(self, index=None) -> np.ndarray:
         """(3, N) float32 unit ray directions in W of the pixels ``index`` (flat,
@@ -296,6 +317,7 @@ def _distance_steps(d_max, base_step, res0, pix, nlev):
     return ds, lv
 
 
+_NO_MAX = np.zeros(0, np.float32)
 _ROWS = 8  # image rows a worker takes from the queue at a time (render/row_queue.py)
 _GROUP = 32  # profile bins marched side by side (16: 10-15 % slower on AMD Zen 3)
 
@@ -306,12 +328,56 @@ def _level(offs, hs, ws, cxs, cys, lev):
     return offs[lev], hs[lev], ws[lev], cxs[lev], cys[lev]
 
 
+@numba.njit(cache=True, inline="always")
+def _region_max(mx, offs, hs, ws, icx0, icy0, left, top, x0, y0, x1, y1):
+    """An upper bound (m) of every level-0 sample that a bilinear read anywhere in the
+    box [x0, x1] x [y0, y1] (site m) can touch: the max-pooled cells (``mx``, the layout
+    of :attr:`DemPyramid.max_data`) covering the box's samples and one more on each side,
+    read at the finest level where they are at most 4 x 4 (or the top level)."""
+    h0 = hs[0]
+    w0 = ws[0]
+    c_lo = max(math.floor((x0 - left) * icx0 - 0.5) - 1, 0)
+    c_hi = min(math.floor((x1 - left) * icx0 - 0.5) + 2, w0 - 1)
+    r_lo = max(math.floor((top - y1) * icy0 - 0.5) - 1, 0)
+    r_hi = min(math.floor((top - y0) * icy0 - 0.5) + 2, h0 - 1)
+    lev = 0
+    while lev + 1 < offs.size and (
+        (c_hi >> lev) - (c_lo >> lev) > _REGION_CELLS - 1
+        or (r_hi >> lev) - (r_lo >> lev) > _REGION_CELLS - 1
+    ):
+        lev += 1
+    w = ws[lev]
+    m = -np.inf
+    for r in range(r_lo >> lev, min(r_hi >> lev, hs[lev] - 1) + 1):
+        for c in range(c_lo >> lev, min(c_hi >> lev, w - 1) + 1):
+            m = max(m, mx[offs[lev] + r * w + c])
+    return m
+
+
+_REGION_CELLS = 4  # max-pooled cells read per axis at most (below the top level)
+_SKIP_MIN = 8  # profile samples a skip covers at least
+_SKIP_MAX = 64  # and at most (it doubles after each success, halves after a failure)
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
-def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, nwork):
+def _profiles(
+    packed, mx, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, skipped, nwork
+):  # fmt: skip
     """AZ[k, b] = (running max of the elevation slope, terrain height) along bin b.
 
     Bins go in groups of ``_GROUP`` side by side (neighbouring DEM cells, a few cache
-    lines of AZ per step)."""
+    lines of AZ per step).
+
+    Hidden stretches are skipped when ``mx`` (the max-pooled pyramid; empty: never):
+    where the highest DEM sample any read of samples ``k .. k + J - 2`` can touch lies
+    below every bin's sight line so far (``(z_max - z_cam) / d <= A``, the worst ``d`` of
+    the stretch), none of those samples can raise ``A``. Samples ``k .. k + J - 3`` then
+    take ``A`` unchanged and no height (NaN), and ``k + J - 2`` is read as usual. A
+    pixel reads the height only at its first sample with ``A >= s`` and the one before
+    it, and that first sample is never inside a stretch where ``A`` is constant (its
+    predecessor would qualify), nor right after a skipped one, whose ``A`` is the
+    stretch's own: the profile answers every pixel exactly as without skipping.
+    ``skipped[b]``: the samples of bin b skipped so."""
     data, offs, hs, ws, cxs, cys, left, top = packed
     K = ds.size
     G = _GROUP
@@ -333,6 +399,7 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
                 ux[j] = math.cos(th)
                 uy[j] = math.sin(th)
                 kend[b0 + j] = K
+                skipped[b0 + j] = 0
             # steps that every bin of the group takes well inside the DEM (camera inside):
             # no bounds or state tests there, and results go to row buffers first (stores
             # to AZ, which the compiler cannot prove apart from the DEM, kept the loop
@@ -358,7 +425,52 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
                 dsafe = 0.999 * dexit - 1e-6 * (abs(px) + abs(py) + 1.0)
                 while k0 < K and ds[k0] < dsafe:
                     k0 += 1
-                for k in range(k0):
+                jump = 16  # the next skip's length J (samples)
+                wait = 4  # samples read after a failed try before the next (it doubles)
+                next_try = 1  # the first sample at which a skip is tried
+                k = 0
+                while k < k0:
+                    kb = k + jump - 2
+                    if mx.size > 0 and k >= next_try and kb < k0:
+                        # the stretch's box: every bin's segment from ds[k] to ds[kb]
+                        da = ds[k]
+                        db = ds[kb]
+                        x0 = y0 = np.inf
+                        x1 = y1 = -np.inf
+                        amin = np.inf
+                        for j in range(nbg):
+                            xa = px + da * ux[j]
+                            xb = px + db * ux[j]
+                            ya = py + da * uy[j]
+                            yb = py + db * uy[j]
+                            x0 = min(x0, xa, xb)
+                            x1 = max(x1, xa, xb)
+                            y0 = min(y0, ya, yb)
+                            y1 = max(y1, ya, yb)
+                            amin = min(amin, amax[j])
+                        # a coarser level's bilinear read reaches 1.5 of its cells out
+                        lb = lv[kb]
+                        mg = 2.0 / min(cxs[lb], cys[lb])
+                        zmax = _region_max(
+                            mx, offs, hs, ws, cxs[0], cys[0], left, top,
+                            x0 - mg, y0 - mg, x1 + mg, y1 + mg,
+                        )  # fmt: skip
+                        num = zmax + 1e-6 * (abs(zmax) + 1.0) - pz
+                        if num / (da if num >= 0.0 else db) <= amin:
+                            for kk in range(k, kb):
+                                for j in range(nbg):
+                                    AZ[kk, b0 + j, 0] = np.float32(amax[j])
+                                    AZ[kk, b0 + j, 1] = np.nan
+                            for j in range(nbg):
+                                skipped[b0 + j] += kb - k
+                            k = kb
+                            next_try = kb + 1
+                            jump = min(2 * jump, _SKIP_MAX)
+                            wait = 4
+                            continue
+                        jump = max(jump // 2, _SKIP_MIN)
+                        next_try = k + wait
+                        wait = min(2 * wait, _SKIP_MAX)
                     d = ds[k]
                     off, h, w, icx, icy = _level(offs, hs, ws, cxs, cys, lv[k])
                     w32 = np.int32(w)
@@ -393,6 +505,7 @@ def _profiles(packed, px, py, pz, th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ
                     for j in range(nbg):
                         AZ[k, b0 + j, 0] = A0[j]
                         AZ[k, b0 + j, 1] = A1[j]
+                    k += 1
                 if k0 > 0:
                     for j in range(nbg):
                         state[j] = 1
@@ -657,6 +770,7 @@ def trace_heightfield(
     step_fraction: float = 0.5,
     lod_factor: float = 1.0,
     iters: int = 0,
+    skip_hidden: bool = True,
 ) -> TraceResult:
     """First hit of every pixel ray of a pinhole camera (Drake convention: +z forward,
     +x right, +y down) at pose ``X_WC`` (4x4, site frame W) on the DEM.
@@ -668,6 +782,8 @@ def trace_heightfield(
         lod_factor: a mip level is read once its cell is below ``lod_factor`` times the
             pixel footprint at that distance (1 = one cell per pixel).
         iters: regula-falsi refinements of each hit between two profile samples.
+        skip_hidden: skip profile stretches the max-pooled pyramid proves hidden (the
+            same hits to the bit; False reads every sample).
 
     Raises:
         OutOfRangeError: the camera is below the terrain surface or parameters are out of
@@ -714,9 +830,12 @@ def trace_heightfield(
     kend = np.empty(nb, np.int64)
     bx0, by0, bx1, by1 = float(left), float(bottom), float(right), float(top)
     nwork = workers()
+    mx = _NO_MAX if pyramid.max_data is None or not skip_hidden else pyramid.max_data
+    skipped = np.empty(nb, np.int64)
     _profiles(
-        packed, px, py, pz, th_ref + th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend, nwork
-    )
+        packed, mx, px, py, pz, th_ref + th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend,
+        skipped, nwork,
+    )  # fmt: skip
     bth = th_ref + th_lo + (np.arange(nb) + 0.5) * dth
     bcos, bsin = np.cos(bth), np.sin(bth)
     n = width * height
@@ -728,5 +847,6 @@ def trace_heightfield(
         t, lev, nwork,
     )  # fmt: skip
     return TraceResult(
-        t=t, level=lev, bins=nb, steps=K, R_WC=R, intrinsics=(fx, fy, cx, cy, width, height)
-    )
+        t=t, level=lev, bins=nb, steps=K, R_WC=R, intrinsics=(fx, fy, cx, cy, width, height),
+        samples=int(kend.sum()), skipped=int(skipped.sum()),
+    )  # fmt: skip
