@@ -9,8 +9,8 @@ more than most changes it is asked to judge. So each *pair* runs tree A and tree
 the same time, each pinned to one core (``os.sched_setaffinity``), and the next pair
 swaps the cores; whatever load the machine carries then falls on both sides alike.
 
-Each side is a child process started in its tree (``cwd`` and ``PYTHONPATH`` = the
-tree, so it imports that tree's ``lunar_drake``): it builds the scenario's mission
+Each side is a child process started in its tree (``cwd``, and the tree first on
+``PYTHONPATH``, so it imports that tree's ``lunar_drake``): it builds the scenario's mission
 diagram, runs ``--warmup-s`` untimed, then ``--runs`` runs of ``--sim-s`` simulated
 seconds from fresh contexts, and reports each run's CPU seconds of the simulating thread
 (``time.thread_time``) and wall seconds, and where the rover ended. A pair's figure is
@@ -20,10 +20,14 @@ factors of each side (simulated / median wall seconds). The rovers' end points a
 compared too: equal to the bit when the change is meant not to change results.
 
 Both trees need ``lunar_drake.diagrams.mission.MakeMissionDiagram``,
-``lunar_drake.scenario_files.load_scenario`` and ``lunar_drake.site.load_site`` (every
-revision since issue 29). The children inherit this process's allocator setting
-(:mod:`lunar_drake.allocator`); the speed index is measured once, before the pairs.
-On a machine with one core the sides share it (recorded as ``cores``).
+``lunar_drake.scenario_files.load_scenario`` and ``lunar_drake.site.load_site``. A side
+fails, named, when any ``lunar_drake`` module it loaded comes from outside its tree (an
+editable install of another checkout would otherwise fill in what the tree lacks). The
+children inherit this process's allocator setting (:mod:`lunar_drake.allocator`) and
+the site cache (one site for both, built by whichever tree built it first); the speed
+index is measured once, before the pairs. Only the simulating thread is pinned and timed
+(a change that moves work to other threads would look faster than it is). On a machine
+with one core the sides share it (recorded as ``cores``).
 
 JSON ``{pairs: [{a_core, b_core, a: {...}, b: {...}, ratio_cpu}], median_ratio_cpu,
 b_faster_pairs, a_rtf, b_rtf, a_rev, b_rev, same_end, speed_index_s, ...}``.
@@ -40,13 +44,6 @@ import sys
 import time
 from pathlib import Path
 
-from lunar_drake.files import atomic_write_text, check_output_file
-
-try:
-    from benchmarks.speed_index import measure_speed_index, speed_index_line
-except ImportError:  # run as a script: benchmarks/ itself is on sys.path
-    from speed_index import measure_speed_index, speed_index_line
-
 NO_CAMERAS = "{sensors: {camera: {enabled: false}}}"
 
 
@@ -55,12 +52,14 @@ def child(*, scenario_name: str, text: str, sim_s: float, runs: int, warmup_s: f
     """One side of a pair, in the tree under test (its ``lunar_drake`` imported here)."""
     if core is not None:
         os.sched_setaffinity(0, {core})
+    tree = Path.cwd().resolve()
     from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
     from lunar_drake.diagrams.mission import MakeMissionDiagram
     from lunar_drake.scenario_files import load_scenario
     from lunar_drake.site import load_site
 
+    _check_own_modules(tree)
     scenario = load_scenario(scenario_name=scenario_name, scenario_text=text)
     site = load_site(scenario, progress=False)
     diagram = MakeMissionDiagram(scenario=scenario, site=site)
@@ -81,8 +80,26 @@ def child(*, scenario_name: str, text: str, sim_s: float, runs: int, warmup_s: f
         ctx = diagram.GetMyContextFromRoot(sim.get_context())
         pose = diagram.GetOutputPort("truth.pose").Eval(ctx)
         out.append({"wall_s": wall, "cpu_s": cpu, "end_xyz_m": [float(v) for v in pose[:3]]})
+    _check_own_modules(tree)  # and those the run imported on the way
     return {"runs": out, "cpu_med_s": statistics.median(r["cpu_s"] for r in out),
             "wall_med_s": statistics.median(r["wall_s"] for r in out)}  # fmt: skip
+
+
+def _check_own_modules(tree: Path) -> None:
+    """Raises when a loaded ``lunar_drake`` module comes from outside ``tree``: a module
+    the tree lacks may be found elsewhere (an editable install of another checkout), and
+    the side would not be the tree it claims to be."""
+    foreign = sorted(
+        name for name, m in sys.modules.items()
+        if (name == "lunar_drake" or name.startswith("lunar_drake."))
+        and getattr(m, "__file__", None)
+        and not Path(m.__file__).resolve().is_relative_to(tree)
+    )  # fmt: skip
+    if foreign:
+        raise RuntimeError(
+            f"{len(foreign)} lunar_drake module(s) loaded from outside {tree}, e.g. "
+            f"{', '.join(foreign[:3])}: the tree lacks them"
+        )
 
 
 def _revision(tree: Path) -> str:
@@ -104,7 +121,8 @@ def _launch(tree: Path, args, core: int | None, out_path: Path) -> subprocess.Po
            "--warmup-s", str(args.warmup_s), "--child-out", str(out_path)]  # fmt: skip
     if core is not None:
         cmd += ["--core", str(core)]
-    env = dict(os.environ, PYTHONPATH=str(tree))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(tree), env.get("PYTHONPATH")) if p)
     return subprocess.Popen(cmd, cwd=str(tree), env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)  # fmt: skip
 
@@ -143,6 +161,14 @@ def main(argv=None) -> int:
             p.error(f"--{side} = {getattr(args, side)!r} is not a lunar_drake source tree "
                     f"(no lunar_drake/__init__.py there)")  # fmt: skip
         trees[side] = tree
+    # the parent's own imports (the children import only their trees' lunar_drake)
+    from lunar_drake.files import atomic_write_text, check_output_file
+
+    try:
+        from benchmarks.speed_index import measure_speed_index, speed_index_line
+    except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+        from speed_index import measure_speed_index, speed_index_line
+
     if args.out:
         check_output_file(args.out, what="results JSON")
 
@@ -160,18 +186,30 @@ def main(argv=None) -> int:
         else:
             ca = cb = None
         outs = {s: tmp / f"paired_rate_{stamp}_{k}_{s}.json" for s in ("a", "b")}
-        procs = {"a": _launch(trees["a"], args, ca, outs["a"]),
-                 "b": _launch(trees["b"], args, cb, outs["b"])}  # fmt: skip
+        procs = {}
         res = {}
-        for s, proc in procs.items():
-            _, err = proc.communicate()
-            if proc.returncode != 0:
-                last = (err or "").strip().splitlines()[-1:] or ["(no output)"]
-                print(f"paired_rate.py: error: side {s.upper()} ({trees[s]}) exited "
-                      f"{proc.returncode}: {last[0]}", file=sys.stderr)  # fmt: skip
-                return 2
-            res[s] = json.loads(outs[s].read_text())
-            outs[s].unlink()
+        failed = None
+        try:
+            procs = {"a": _launch(trees["a"], args, ca, outs["a"]),
+                     "b": _launch(trees["b"], args, cb, outs["b"])}  # fmt: skip
+            for s, proc in procs.items():
+                _, err = proc.communicate()
+                if proc.returncode != 0 and failed is None:
+                    last = (err or "").strip().splitlines()[-1:] or ["(no output)"]
+                    failed = (f"side {s.upper()} ({trees[s]}) exited {proc.returncode}: "
+                              f"{last[0]}")  # fmt: skip
+                    break
+                res[s] = json.loads(outs[s].read_text())
+        finally:  # a side still running (the other failed, or Ctrl-C) stops with us
+            for proc in procs.values():
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+            for f in outs.values():
+                f.unlink(missing_ok=True)
+        if failed:
+            print(f"paired_rate.py: error: {failed}", file=sys.stderr)
+            return 2
         ratio = res["b"]["cpu_med_s"] / res["a"]["cpu_med_s"]
         pairs.append({"a_core": ca, "b_core": cb, "a": res["a"], "b": res["b"], "ratio_cpu": ratio})
         print(f"{k + 1:>4} {ca!s:>6} {cb!s:>6} {res['a']['cpu_med_s']:>9.3f} "
@@ -183,6 +221,12 @@ def main(argv=None) -> int:
     rtf = {s: args.sim_s / statistics.median(q[s]["wall_med_s"] for q in pairs) for s in ("a", "b")}
     ends = {s: {tuple(r["end_xyz_m"]) for q in pairs for r in q[s]["runs"]} for s in ("a", "b")}
     same_end = len(ends["a"]) == 1 and ends["a"] == ends["b"]
+    ends_said = (
+        "equal to the bit" if same_end
+        else "A's runs disagree among themselves" if len(ends["a"]) > 1
+        else "B's runs disagree among themselves" if len(ends["b"]) > 1
+        else "A and B end at different points"
+    )  # fmt: skip
     result = {
         "benchmark": "paired_rate",
         "a": str(trees["a"]), "b": str(trees["b"]),
@@ -200,7 +244,7 @@ def main(argv=None) -> int:
     print(f"B / A thread CPU, median of {len(pairs)} pairs: {med:.3f} ({(med - 1) * 100:+.1f} %); "
           f"B faster in {faster} of {len(pairs)}")  # fmt: skip
     print(f"real-time factor side by side: A {rtf['a']:.2f}x, B {rtf['b']:.2f}x; end points "
-          + ("equal to the bit" if same_end else "differ"))  # fmt: skip
+          + ends_said)  # fmt: skip
     print(speed_index_line(speed))
     if args.out:
         atomic_write_text(args.out, json.dumps(result, indent=2) + "\n", what="results JSON")
@@ -208,7 +252,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from lunar_drake.allocator import reexec_or_exit
+    if "--child" not in sys.argv[1:]:  # a child inherits the parent's setting, and its tree
+        from lunar_drake.allocator import reexec_or_exit  # may predate the module
 
-    reexec_or_exit("paired_rate.py")  # as the lunar-drake program runs (lunar_drake/allocator.py)
+        reexec_or_exit("paired_rate.py")  # as lunar-drake runs (lunar_drake/allocator.py)
     sys.exit(main())

@@ -13,9 +13,10 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "paired_rate.py"
 
 
-def _run(*args, cwd):
+def _run(*args, cwd, tmpdir=None):
+    env = dict(os.environ, TMPDIR=str(tmpdir)) if tmpdir else None
     return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True,
-                          timeout=600, cwd=cwd)  # fmt: skip
+                          timeout=600, cwd=cwd, env=env)  # fmt: skip
 
 
 def test_a_tree_against_itself_pairs_swapped_cores_and_ends_at_the_same_point(tmp_path):
@@ -37,16 +38,21 @@ def test_a_tree_against_itself_pairs_swapped_cores_and_ends_at_the_same_point(tm
     assert res["a_rtf"] > 0 and "B / A thread CPU" in r.stdout
 
 
-def test_each_side_imports_its_own_tree(tmp_path):
-    # a "tree" whose lunar_drake lacks the modules: its side fails, named, in one line
+def test_each_side_imports_its_own_tree_and_nothing_else(tmp_path):
+    # a "tree" whose lunar_drake lacks the modules: whatever fills them in (an editable
+    # install of this checkout), its side fails, named, in one line, and the other side
+    # is stopped
     fake = tmp_path / "fake"
     (fake / "lunar_drake").mkdir(parents=True)
     (fake / "lunar_drake" / "__init__.py").write_text("")
     r = _run("--a", str(ROOT), "--b", str(fake), "--scenario", "small", "--sim-s", "0.5",
-             "--runs", "1", "--rounds", "1", "--warmup-s", "0", cwd=tmp_path)  # fmt: skip
+             "--runs", "1", "--rounds", "1", "--warmup-s", "0", cwd=tmp_path,
+             tmpdir=tmp_path)  # fmt: skip
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
-    assert "side B" in r.stderr and str(fake) in r.stderr and "lunar_drake" in r.stderr
+    assert "side B" in r.stderr and str(fake.resolve()) in r.stderr
+    assert "lunar_drake" in r.stderr
+    assert not list(tmp_path.glob("paired_rate_*.json"))  # nothing left behind
 
 
 @pytest.mark.parametrize(

@@ -176,6 +176,48 @@ def test_the_max_pyramid_bounds_every_level_0_sample_it_covers():
         assert (mx >= mean).all()  # and so never below the mean level's cell
 
 
+def test_a_skipped_stretch_keeps_the_profile_and_hides_only_heights_no_pixel_reads(
+    monkeypatch,
+):
+    """The profiles themselves, with and without the skip: the running maximum the same
+    to the bit at every sample, the heights the same wherever read; NaN exactly at the
+    skipped samples, never at a pixel's crossing sample or the one before it."""
+    import lunar_drake.render.heightfield_trace as ht
+
+    captured = []
+    kernel = ht._profiles
+
+    def capture(*a):
+        kernel(*a)
+        AZ, kend, skipped = a[14], a[15], a[16]
+        captured.append((AZ.copy(), kend.copy(), skipped.copy()))
+
+    monkeypatch.setattr(ht, "_profiles", capture)
+    hf = _ridged()
+    pyr = DemPyramid.from_heightfield(hf)
+    cam = _cam(w=320, h=240)
+    z = float(pyr.height(-10.0, 0.5)[0])
+    X = _pose([-10.0, 0.5, z + 0.6], yaw_deg=10.0, tilt_deg=8.0)
+    fast = _trace(pyr, cam, X)
+    full = _trace(pyr, cam, X, skip_hidden=False)
+    (az_f, kend_f, sk_f), (az_0, kend_0, sk_0) = captured
+    assert (kend_f == kend_0).all() and sk_0.sum() == 0 and sk_f.sum() == fast.skipped > 0
+    K = az_0.shape[0]
+    live = np.arange(K)[:, None] < kend_0[None, :]  # samples each bin really has
+    np.testing.assert_array_equal(az_f[..., 0][live], az_0[..., 0][live])
+    hidden = live & np.isnan(az_f[..., 1])
+    assert hidden.sum() == fast.skipped
+    np.testing.assert_array_equal(az_f[..., 1][live & ~hidden], az_0[..., 1][live & ~hidden])
+    # a skipped sample never raises the running maximum, and the sample after a skipped
+    # stretch is read: its height (what a pixel crossing right after uses) is there
+    a0 = az_0[..., 0]
+    assert (a0[1:][hidden[1:]] == a0[:-1][hidden[1:]]).all()
+    after = np.zeros_like(hidden)
+    after[1:] = hidden[:-1] & ~hidden[1:] & live[1:]
+    assert after.any() and not np.isnan(az_f[..., 1][after]).any()
+    np.testing.assert_array_equal(fast.t, full.t)
+
+
 @pytest.mark.parametrize(
     ("p", "yaw", "tilt", "roll", "hidden"),
     [
@@ -196,6 +238,9 @@ def test_hidden_profile_stretches_are_skipped_without_changing_a_hit(p, yaw, til
     assert full.skipped == 0 and fast.samples == full.samples
     np.testing.assert_array_equal(fast.t, full.t)  # to the bit
     np.testing.assert_array_equal(fast.level, full.level)
+    # the refined crossings (regula falsi on the pixel's own ray) too
+    refined = _trace(pyr, cam, X, iters=2)
+    np.testing.assert_array_equal(refined.t, _trace(pyr, cam, X, iters=2, skip_hidden=False).t)
     assert np.isfinite(fast.t).mean() > 0.3
     assert fast.skipped >= hidden * fast.samples  # stretches behind the berm: skipped
     # a pyramid without the max levels reads every sample, the same hits

@@ -355,7 +355,7 @@ def _region_max(mx, offs, hs, ws, icx0, icy0, left, top, x0, y0, x1, y1):
 
 
 _REGION_CELLS = 4  # max-pooled cells read per axis at most (below the top level)
-_SKIP_MIN = 8  # profile samples a skip covers at least
+_SKIP_MIN = 8  # a skip's stretch J, at least (J - 1 samples bounded, J - 2 not read)
 _SKIP_MAX = 64  # and at most (it doubles after each success, halves after a failure)
 
 
