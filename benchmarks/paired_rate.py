@@ -20,7 +20,9 @@ factors of each side (simulated / median wall seconds). The rovers' end points a
 compared too: equal to the bit when the change is meant not to change results.
 
 Both trees need ``lunar_drake.diagrams.mission.MakeMissionDiagram``,
-``lunar_drake.scenario_files.load_scenario`` and ``lunar_drake.site.load_site``. A side
+``lunar_drake.scenario_files.load_scenario``, ``lunar_drake.site.load_site`` and
+``lunar_drake.files`` (imported by ``benchmarks/sim_rate.py``, whose
+:func:`~sim_rate.fresh_run` times the runs). A side
 fails, named, when any ``lunar_drake`` module it loaded comes from outside its tree (an
 editable install of another checkout would otherwise fill in what the tree lacks). The
 children inherit this process's allocator setting (:mod:`lunar_drake.allocator`) and
@@ -44,6 +46,8 @@ import sys
 import time
 from pathlib import Path
 
+from sim_rate import fresh_run  # benchmarks/ is on sys.path: this file runs as a script
+
 NO_CAMERAS = "{sensors: {camera: {enabled: false}}}"
 
 
@@ -53,8 +57,6 @@ def child(*, scenario_name: str, text: str, sim_s: float, runs: int, warmup_s: f
     if core is not None:
         os.sched_setaffinity(0, {core})
     tree = Path.cwd().resolve()
-    from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
-
     from lunar_drake.diagrams.mission import MakeMissionDiagram
     from lunar_drake.scenario_files import load_scenario
     from lunar_drake.site import load_site
@@ -65,12 +67,7 @@ def child(*, scenario_name: str, text: str, sim_s: float, runs: int, warmup_s: f
     diagram = MakeMissionDiagram(scenario=scenario, site=site)
 
     def advance(t_s: float):
-        sim = Simulator(diagram)
-        ApplySimulatorConfig(scenario.simulator_config, sim)
-        sim.Initialize()
-        w0, c0 = time.perf_counter(), time.thread_time()
-        sim.AdvanceTo(t_s)
-        return sim, time.perf_counter() - w0, time.thread_time() - c0
+        return fresh_run(diagram, scenario, t_s, cpu_clock=time.thread_time)
 
     if warmup_s > 0:
         advance(warmup_s)

@@ -29,6 +29,19 @@ except ImportError:  # run as a script: benchmarks/ itself is on sys.path
     from speed_index import measure_speed_index, speed_index_line
 
 
+def fresh_run(diagram, scenario, t_s: float, *, cpu_clock=time.process_time):
+    """Simulates ``diagram`` for ``t_s`` simulated seconds from a fresh context under
+    ``scenario``'s simulator config: ``(simulator, wall s, CPU s by cpu_clock)``."""
+    from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+
+    sim = Simulator(diagram)
+    ApplySimulatorConfig(scenario.simulator_config, sim)
+    sim.Initialize()
+    t0, c0 = time.perf_counter(), cpu_clock()
+    sim.AdvanceTo(t_s)
+    return sim, time.perf_counter() - t0, cpu_clock() - c0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--scenario", default="default")
@@ -45,8 +58,6 @@ def main(argv=None) -> int:
     if args.out:
         check_output_file(args.out, what="results JSON")
 
-    from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
-
     from lunar_drake.diagrams.mission import MakeMissionDiagram
     from lunar_drake.scenario_files import load_scenario
     from lunar_drake.site import load_site
@@ -54,13 +65,9 @@ def main(argv=None) -> int:
     scenario = load_scenario(scenario_name=args.scenario, scenario_text=args.scenario_text)
     site = load_site(scenario, progress=False)
     diagram = MakeMissionDiagram(scenario=scenario, site=site)
+
     def advance(t_s: float):
-        sim = Simulator(diagram)
-        ApplySimulatorConfig(scenario.simulator_config, sim)
-        sim.Initialize()
-        t0, c0 = time.perf_counter(), time.process_time()
-        sim.AdvanceTo(t_s)
-        return sim, time.perf_counter() - t0, time.process_time() - c0
+        return fresh_run(diagram, scenario, t_s)
 
     warmup = None
     if args.warmup_s > 0:
