@@ -249,8 +249,12 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    if "--child" not in sys.argv[1:]:  # a child inherits the parent's setting, and its tree
-        from lunar_drake.allocator import reexec_or_exit  # may predate the module
+    if "--child" in sys.argv[1:]:  # it inherits the parent's allocator setting; its tree
+        sys.exit(main())  # may predate lunar_drake.allocator and benchmarks.run_main
+    from lunar_drake.allocator import reexec_or_exit
 
-        reexec_or_exit("paired_rate.py")  # as lunar-drake runs (lunar_drake/allocator.py)
-    sys.exit(main())
+    reexec_or_exit("paired_rate.py")  # as lunar-drake runs (lunar_drake/allocator.py)
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from benchmarks import run_main
+
+    run_main(main, "paired_rate.py")  # bad input: one line, exit 2

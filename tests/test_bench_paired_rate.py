@@ -59,9 +59,12 @@ def test_each_side_imports_its_own_tree_and_nothing_else(tmp_path):
     ("args", "says"),
     [(["--a", "/nonexistent", "--b", "."], "--a = '/nonexistent' is not a lunar_drake source tree"),
      (["--a", ".", "--b", ".", "--runs", "0"], "--runs = 0; at least 1"),
-     (["--a", "."], "--a and --b (two source trees) are required")],
+     (["--a", "."], "--a and --b (two source trees) are required"),
+     (["--a", ".", "--b", ".", "--out", "/nonexistent/dir/p.json"], "does not exist")],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(args, says):
     r = _run(*args, cwd=ROOT)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert says in r.stderr
+    if "--out" in args:  # ours, not argparse's (which adds a usage line)
+        assert len(r.stderr.strip().splitlines()) == 1

@@ -247,6 +247,9 @@ def test_hidden_profile_stretches_are_skipped_without_changing_a_hit(p, yaw, til
     plain = _trace(dc.replace(pyr, max_data=None), cam, X)
     assert plain.skipped == 0
     np.testing.assert_array_equal(plain.t, full.t)
+    # a max pyramid of another layout is refused, not read out of bounds
+    with pytest.raises(ConfigError, match="max_data is float32"):
+        _trace(dc.replace(pyr, max_data=pyr.max_data[:-5]), cam, X)
 
 
 def test_camera_below_the_surface_and_bad_options_raise():

@@ -831,6 +831,11 @@ def trace_heightfield(
     bx0, by0, bx1, by1 = float(left), float(bottom), float(right), float(top)
     nwork = workers()
     mx = _NO_MAX if pyramid.max_data is None or not skip_hidden else pyramid.max_data
+    if mx.size and (mx.dtype != np.float32 or mx.shape != pyramid.data.shape):
+        raise ConfigError(
+            f"DemPyramid.max_data is {mx.dtype} {mx.shape}; the layout of data, float32 "
+            f"{pyramid.data.shape}, is required (DemPyramid.build makes it), or None"
+        )
     skipped = np.empty(nb, np.int64)
     _profiles(
         packed, mx, px, py, pz, th_ref + th_lo, dth, nb, ds, lv, bx0, by0, bx1, by1, AZ, kend,
