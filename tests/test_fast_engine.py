@@ -19,7 +19,12 @@ from lunar_drake.render.hapke_lut import (
     lut_reflectance_at,
     lut_reflectance_at_f32,
 )
-from lunar_drake.render.heightfield_trace import DemPyramid, trace_heightfield
+from lunar_drake.render.heightfield_trace import (
+    DemPyramid,
+    direction_f32,
+    pixel_direction,
+    trace_heightfield,
+)
 from lunar_drake.render.raycast import DynamicMesh, PinholeCamera, TerrainRaycaster
 from lunar_drake.render.shading import RasterSampler
 from lunar_drake.render.shapes import box_mesh
@@ -522,3 +527,53 @@ def test_track_gradients_are_read_only_where_the_raster_reaches():
     a, b = imgs[0.0], imgs[None]
     assert a.radiance.tobytes() == b.radiance.tobytes()
     assert (a.radiance != flat.radiance).sum() > 200  # the grooves show
+
+
+def test_float32_ray_directions_are_the_float64_ones_to_a_few_ulps():
+    # the trace's ray slopes and bins and the shading kernel's directions and camera-z
+    # depth use direction_f32; the reference is pixel_direction (float64), and the
+    # camera-z component 1 / |(xc, yc, 1)| is computed here on its own
+    X = _pose([1.0, -2.0, 3.0], yaw_deg=37.0, tilt_deg=21.0, roll_deg=-9.0)
+    R = np.ascontiguousarray(X[:3, :3])
+    fx, fy, cx, cy = 700.0, 690.0, 639.5, 479.5
+    R32, ifx, cx32 = R.astype(np.float32), np.float32(1.0 / fx), np.float32(cx)
+    worst = 0.0
+    for r in (0, 1, 333, 959):
+        yc = np.float32((r - cy) / fy)
+        for c in (0, 1, 640, 1279):
+            d64 = np.array(pixel_direction(R, fx, fy, cx, cy, r, c))
+            *d32, zc = direction_f32.py_func(R32, ifx, cx32, yc, c)
+            assert all(isinstance(v, np.float32) for v in (*d32, zc))
+            worst = max(worst, float(np.abs(np.array(d32, np.float64) - d64).max()))
+            zc64 = 1.0 / math.sqrt(((c - cx) / fx) ** 2 + ((r - cy) / fy) ** 2 + 1.0)
+            assert abs(float(zc) - zc64) <= 4 * np.finfo(np.float32).eps
+    assert 0.0 < worst <= 8 * np.finfo(np.float32).eps  # float32, and only float32 rounding
+
+
+def test_a_terrain_pixel_does_not_depend_on_the_rest_of_its_row():
+    # the kernel shades a row's terrain pixels as one run of columns when they are
+    # contiguous and compacts them otherwise: rows that the rover splits take the second
+    # path; their terrain pixels must come out as in the same frame without the rover
+    hf = _bumpy()
+    box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
+    z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
+    X_box = np.eye(4)
+    X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
+    X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    sun = (-0.9, 0.1, 0.4)  # the box's shadow falls behind it, out of view
+    lm = RasterSampler.on_heightfield(np.full(hf.shape, 0.9, np.float32), hf, outside=1.0)
+    out = []
+    for meshes, poses in (([box], [X_box]), ([], [])):
+        r = _renderers(hf, meshes)["heightfield"]
+        il, _ = r.illumination(sun_dir_W=sun, earth_dir_W=(0.2, -0.3, 0.93), earth_phase=0.6)
+        out.append(r.shade(X_WC=X, illumination=il, dynamic_poses=poses, lightmap=lm))
+    a, b = out
+    split = [
+        i for i, row in enumerate(a.label)
+        if (row == 2).any() and (row[: np.argmax(row == 2)] == 1).any() and (row[-1] == 1)
+    ]  # fmt: skip
+    assert len(split) > 10  # rows with terrain on both sides of the rover
+    t = a.label == 1
+    assert (b.label[t] == 1).all()
+    assert a.depth[t].tobytes() == b.depth[t].tobytes()
+    assert a.radiance[t].tobytes() == b.radiance[t].tobytes()

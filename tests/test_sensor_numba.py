@@ -140,6 +140,23 @@ def test_colour_channels_and_float32_radiance_scale():
     assert np.array_equal(fused, _reference(sn.radiance_from_i_over_f(i_over_f), frame_index=5))
 
 
+def test_clamp_negative_is_np_maximum_without_the_copy():
+    # float32 radiance with negatives (a renderer's rounding), -0.0 and zeros
+    rng = np.random.default_rng(4)
+    L = rng.normal(0.0, 2e-3, (40, 56)).astype(np.float32)
+    L[0, :4] = [-0.0, 0.0, -1e-30, np.float32(-3e-3)]
+    s = P.band_solar_irradiance_W_m2 / math.pi
+    kw = dict(radiance_scale=s, exposure_s=T, key=KEY, frame_index=3)
+    fused = sn.expose(L, clamp_negative=True, **kw)
+    assert np.array_equal(fused, sn.expose(np.maximum(L, np.float32(0.0)), **kw))
+    assert (L < 0).sum() > 100
+    with pytest.raises(OutOfRangeError, match="radiance must be finite and >= 0"):
+        sn.expose(L, **kw)  # without the clamp a negative value fails
+    L[3, 3] = np.nan
+    with pytest.raises(OutOfRangeError, match="1 non-finite values"):
+        sn.expose(L, clamp_negative=True, **kw)  # NaN is not clamped
+
+
 def test_same_key_and_frame_same_bytes_whatever_the_threads():
     L = _radiance(_mixed_electrons())
     a = sn.expose(L, exposure_s=T, key=KEY, frame_index=9)

@@ -397,8 +397,9 @@ class TerrainCameraRenderer:
         # L = (I/F) E_band / pi (sensor.radiance_from_i_over_f at 1 au), applied inside
         # the sensor kernel: the same bytes without a float64 copy of the frame
         return sensor_mod.expose(
-            np.maximum(shaded.radiance, np.float32(0.0)),
+            shaded.radiance,
             radiance_scale=self.sensor.band_solar_irradiance_W_m2 / math.pi,
+            clamp_negative=True,
             exposure_s=exposure_s,
             gain=gain,
             params=self.sensor,

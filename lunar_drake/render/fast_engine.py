@@ -40,7 +40,7 @@ from lunar_drake.render.hapke_lut import (
     lut_corner_f32,
     trilerp,
 )
-from lunar_drake.render.heightfield_trace import DemPyramid, pixel_direction, trace_heightfield
+from lunar_drake.render.heightfield_trace import DemPyramid, direction_f32, trace_heightfield
 from lunar_drake.render.raycast import (
     INVALID_ID,
     PinholeCamera,
@@ -223,6 +223,15 @@ def _row_max(a, n):
     return m
 
 
+@numba.njit(cache=True, inline="always")
+def _sky_pixel(i, rad_out, cand_out, label_out, depth_out):
+    """The outputs of a pixel the terrain kernel does not shade (sky, or the rover's)."""
+    rad_out[i] = 0.0
+    cand_out[i] = 0
+    label_out[i] = 0
+    depth_out[i] = np.inf
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _shade_terrain(
     t, R, fx, fy, cx, cy, skip, width, height, cam,
@@ -250,10 +259,12 @@ def _shade_terrain(
     tinv = np.float32(1.0) / tsize
     sh = surf.shape[0]
     sw = surf.shape[1]
+    R32 = R.astype(np.float32)
+    ifx = np.float32(1.0 / fx)
+    cx32 = np.float32(cx)
     counter = np.zeros(1, np.int64)  # the next row to render (row_queue)
     for _w in numba.prange(nwork):
         col_of = np.empty(width, np.int64)
-        CF = np.empty(width)
         D0 = np.empty(width, np.float32)
         D1 = np.empty(width, np.float32)
         D2 = np.empty(width, np.float32)
@@ -267,6 +278,7 @@ def _shade_terrain(
         NZ = np.empty(width, np.float32)
         AF = np.empty(width, np.float32)
         YE = np.empty(width, np.float32)
+        ZC = np.empty(width, np.float32)
         SUN = np.zeros(width, np.float32)
         OTH = np.zeros(width, np.float32)
         TMP = np.empty(width, np.float32)
@@ -294,24 +306,45 @@ def _shade_terrain(
             if row >= height:
                 break
             base = row * width
+            # the row's terrain pixels: their count (vector code), then, when they form
+            # one run of columns (the usual case), the run without branches and the sky
+            # values on the other columns only; else the general compaction
             n = 0
             for col in range(width):
-                i = base + col
-                rad_out[i] = 0.0
-                cand_out[i] = 0
-                label_out[i] = 0
-                depth_out[i] = np.inf
-                if t[i] < np.inf and skip[i] == 0:
-                    col_of[n] = col
-                    CF[n] = col
-                    TT[n] = t[i]
-                    n += 1
+                n += (t[base + col] < np.inf) & (skip[base + col] == 0)
+            first = 0
+            last = -1
+            if n > 0:
+                while not (t[base + first] < np.inf and skip[base + first] == 0):
+                    first += 1
+                last = width - 1
+                while not (t[base + last] < np.inf and skip[base + last] == 0):
+                    last -= 1
+            if n > 0 and last - first + 1 == n:
+                for col in range(first):
+                    _sky_pixel(base + col, rad_out, cand_out, label_out, depth_out)
+                for col in range(last + 1, width):
+                    _sky_pixel(base + col, rad_out, cand_out, label_out, depth_out)
+                for j in range(n):
+                    col_of[j] = first + j
+                    TT[j] = t[base + first + j]
+            else:
+                n = 0
+                for col in range(width):
+                    i = base + col
+                    _sky_pixel(i, rad_out, cand_out, label_out, depth_out)
+                    if t[i] < np.inf and skip[i] == 0:
+                        col_of[n] = col
+                        TT[n] = t[i]
+                        n += 1
             for j in range(n):  # the worker's buffers hold the last row's values
                 SUN[j] = 0.0
                 OTH[j] = 0.0
                 CU[j] = 0
-            for j in range(n):  # directions and hit points
-                d0, d1, d2 = pixel_direction(R, fx, fy, cx, cy, row, CF[j])
+            yc32 = np.float32((row - cy) / fy)
+            for j in range(n):  # directions (float32, as they are stored) and hit points
+                d0, d1, d2, zc = direction_f32(R32, ifx, cx32, yc32, col_of[j])
+                ZC[j] = zc
                 ti = TT[j]
                 D0[j] = d0
                 D1[j] = d1
@@ -540,9 +573,7 @@ def _shade_terrain(
                 other_i = np.float32(OTH[j] * AF[j] * math.pi)
                 SUN[j] = sun_i
                 OTH[j] = other_i
-                xc = (CF[j] - cx) / fx
-                yc = (row - cy) / fy
-                TT[j] = TT[j] * np.float32(1.0 / math.sqrt(xc * xc + yc * yc + 1.0))
+                TT[j] = TT[j] * ZC[j]  # camera-z depth
             if n > 0 and col_of[n - 1] - col_of[0] == n - 1:  # one run of columns: vector stores
                 b0 = base + col_of[0]
                 for j in range(n):

@@ -14,8 +14,9 @@ Method (per frame, compiled with numba, both cores):
 2. **Pixels.** A pixel's ray with horizontal direction ``u`` and slope ``s = d_z / |d_xy|``
    first meets the terrain where ``A_k >= s`` (a galloping search from the neighbouring
    pixel's answer; 95% of pixels share their left neighbour's ``k``). Pixels go row by
-   row in three passes (ray slopes and bins, searches, crossings) so that the
-   arithmetic passes compile to vector code. The crossing inside ``[d_(k-1), d_k]`` is
+   row in two passes: ray slopes and bins (float32 vector code: the profile it is
+   compared with is float32), then per pixel the search and the crossing (while the
+   search's lines of the profile are in cache). The crossing inside ``[d_(k-1), d_k]`` is
    found on the bin's centre ray by linear interpolation between the two samples and the
    pixel's hit is taken at that horizontal distance along its own ray; with ``iters > 0``
    it is refined on the pixel's *own* azimuth (the bracket moved up to four samples
@@ -237,20 +238,24 @@ def _bilinear_cell(off, h, w, icx, icy, left, top, x, y):
     return np.int32(off) + r0 * np.int32(w) + c0, fc, fr
 
 
+_F32 = np.float32
+
+
 @numba.njit(cache=True, inline="always", error_model="numpy")
 def _atan2(y, x):
-    """atan2 to ~1e-5 rad (a minimax polynomial on [0, 1]; bins only need ~1e-4)."""
+    """atan2 to ~1e-5 rad, float32 (a minimax polynomial on [0, 1]; bins only need ~1e-4)."""
     ax = abs(x)
     ay = abs(y)
     mx = max(ax, ay)
-    a = min(ax, ay) / (mx if mx > 0.0 else 1.0)  # (0, 0): 0
+    a = min(ax, ay) / (mx if mx > _F32(0.0) else _F32(1.0))  # (0, 0): 0
     q = a * a
-    r = (((-0.0117212 * q + 0.05265332) * q - 0.11643287) * q + 0.19354346) * q - 0.33262347
-    r = (r * q + 0.99997726) * a
+    r = _F32(-0.0117212) * q + _F32(0.05265332)
+    r = ((r * q - _F32(0.11643287)) * q + _F32(0.19354346)) * q - _F32(0.33262347)
+    r = (r * q + _F32(0.99997726)) * a
     # selects, not branches: the caller's loop stays vector code
-    r = 0.5 * math.pi - r if ay > ax else r
-    r = math.pi - r if x < 0.0 else r
-    return -r if y < 0.0 else r
+    r = _F32(0.5 * math.pi) - r if ay > ax else r
+    r = _F32(math.pi) - r if x < _F32(0.0) else r
+    return -r if y < _F32(0.0) else r
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
@@ -265,6 +270,22 @@ def pixel_direction(R, fx, fy, cx, cy, r, c):
     dy = R[1, 0] * xc + R[1, 1] * yc + R[1, 2] * inv
     dz = R[2, 0] * xc + R[2, 1] * yc + R[2, 2] * inv
     return dx, dy, dz
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
+def direction_f32(R32, ifx, cx32, yc, c):
+    """:func:`pixel_direction` in float32 for column c of a row at ``yc = (r - cy) / fy``
+    (``ifx = 1 / fx``): within a few float32 ulps of it; and its camera-z component
+    ``1 / |(xc, yc, 1)|`` (the depth per unit of ray length)."""
+    one = _F32(1.0)
+    xc = (_F32(c) - cx32) * ifx
+    inv = one / _F32(math.sqrt(xc * xc + yc * yc + one))
+    xc *= inv
+    yq = yc * inv
+    dx = R32[0, 0] * xc + R32[0, 1] * yq + R32[0, 2] * inv
+    dy = R32[1, 0] * xc + R32[1, 1] * yq + R32[1, 2] * inv
+    dz = R32[2, 0] * xc + R32[2, 1] * yq + R32[2, 2] * inv
+    return dx, dy, dz, inv
 
 
 @numba.njit(parallel=True, cache=True)
@@ -563,21 +584,57 @@ def _bisect_first(AZ, b, s, lo, hi):
     return hi
 
 
+@numba.njit(cache=True, inline="always")
+def _first_at_or_above(AZ, b, s, ke, kprev):
+    """The first k < ke with ``AZ[k, b, 0] >= s`` (given ``AZ[ke - 1, b, 0] >= s``; the
+    profile is non-decreasing), galloping from ``kprev``."""
+    k = min(kprev, ke - 1)
+    if AZ[k, b, 0] >= s:
+        if k > 0 and AZ[k - 1, b, 0] >= s:
+            step = 1
+            lo = k
+            while lo > 0 and AZ[lo - 1, b, 0] >= s:
+                nxt = max(lo - step, 0)
+                if AZ[nxt, b, 0] >= s:
+                    lo = nxt
+                    step *= 2
+                else:
+                    lo = _bisect_first(AZ, b, s, nxt, lo)
+                    break
+            k = lo
+        return k
+    step = 1
+    a_ = k
+    b_ = min(k + 1, ke - 1)
+    while AZ[b_, b, 0] < s:
+        a_ = b_
+        step *= 2
+        b_ = min(b_ + step, ke - 1)
+    return _bisect_first(AZ, b, s, a_, b_)
+
+
 @numba.njit(parallel=True, cache=True, error_model="numpy", nogil=True)
 def _pixels(
     packed, R, px, py, pz, fx, fy, cx, cy, width, height,
     th_ref, th_lo, dth, nb, bcos, bsin, ds, lv, AZ, kend, iters, z_below, t_out, lev_out, nwork,
 ):  # fmt: skip
     data, offs, hs, ws, cxs, cys, left, top = packed
-    two_pi = 2.0 * math.pi
+    R32 = R.astype(np.float32)
+    ifx = _F32(1.0 / fx)
+    cx32 = _F32(cx)
+    th_ref32 = _F32(th_ref)
+    th_lo32 = _F32(th_lo)
+    inv_dth32 = _F32(1.0 / dth)
+    nb_last32 = _F32(nb - 1.0)
+    pi32 = _F32(math.pi)
+    two_pi32 = _F32(2.0 * math.pi)
     counter = np.zeros(1, np.int64)  # the next row (render/row_queue.py)
     for _w in numba.prange(nwork):
-        S = np.empty(width)
-        RHO = np.empty(width)
-        UX = np.empty(width)
-        UY = np.empty(width)
+        S = np.empty(width, np.float32)
+        RHO = np.empty(width, np.float32)
+        UX = np.empty(width, np.float32)
+        UY = np.empty(width, np.float32)
         BIN = np.empty(width, np.int32)
-        KK = np.empty(width, np.int64)
         r = -1
         r_end = 0
         while True:
@@ -587,58 +644,27 @@ def _pixels(
                 r_end = min(r + _ROWS, height)
             if r >= height:
                 break
-            # pass 1: ray slope, horizontal direction and azimuth bin (branch-free)
+            # pass 1: ray slope, horizontal direction and azimuth bin (branch-free, float32:
+            # twice the lanes of float64, and the profile it is compared with is float32)
+            yc = _F32((r - cy) / fy)
             for c in range(width):
-                dx, dy, dz = pixel_direction(R, fx, fy, cx, cy, r, c)
-                rho = math.sqrt(dx * dx + dy * dy)
-                rr = 1.0 / max(rho, 1e-30)
+                dx, dy, dz, _ = direction_f32(R32, ifx, cx32, yc, c)
+                rho = _F32(math.sqrt(dx * dx + dy * dy))
+                rr = _F32(1.0) / max(rho, _F32(1e-30))
                 S[c] = dz * rr
                 RHO[c] = rho
                 UX[c] = dx * rr
                 UY[c] = dy * rr
-                delta = _atan2(dy, dx) - th_ref
-                delta = delta - two_pi if delta > math.pi else delta
-                delta = delta + two_pi if delta <= -math.pi else delta
-                bf = (delta - th_lo) / dth
-                bf = min(max(bf, 0.0), nb - 1.0)
+                delta = _atan2(dy, dx) - th_ref32
+                delta = delta - two_pi32 if delta > pi32 else delta
+                delta = delta + two_pi32 if delta <= -pi32 else delta
+                bf = (delta - th_lo32) * inv_dth32
+                bf = min(max(bf, _F32(0.0)), nb_last32)
                 BIN[c] = np.int32(bf)  # bf >= 0: truncation (int32 converts in vector code)
-            # pass 2: first profile sample at or above each ray (from the left neighbour's)
+            # pass 2: per pixel, the first profile sample at or above the ray (a galloping
+            # search from the left neighbour's), then the crossing between samples k - 1
+            # and k, while the search's cache lines of AZ are fresh
             kprev = 0
-            for c in range(width):
-                KK[c] = -1
-                if RHO[c] < 1e-7:
-                    continue
-                b = BIN[c]
-                s = S[c]
-                ke = kend[b]
-                if ke == 0 or AZ[ke - 1, b, 0] < s:
-                    continue
-                k = min(kprev, ke - 1)
-                if AZ[k, b, 0] >= s:
-                    if k > 0 and AZ[k - 1, b, 0] >= s:
-                        step = 1
-                        lo = k
-                        while lo > 0 and AZ[lo - 1, b, 0] >= s:
-                            nxt = max(lo - step, 0)
-                            if AZ[nxt, b, 0] >= s:
-                                lo = nxt
-                                step *= 2
-                            else:
-                                lo = _bisect_first(AZ, b, s, nxt, lo)
-                                break
-                        k = lo
-                else:
-                    step = 1
-                    a_ = k
-                    b_ = min(k + 1, ke - 1)
-                    while AZ[b_, b, 0] < s:
-                        a_ = b_
-                        step *= 2
-                        b_ = min(b_ + step, ke - 1)
-                    k = _bisect_first(AZ, b, s, a_, b_)
-                kprev = k
-                KK[c] = k
-            # pass 3: the crossing between samples k - 1 and k
             for c in range(width):
                 i = r * width + c
                 t_out[i] = np.inf
@@ -653,14 +679,15 @@ def _pixels(
                         t_out[i] = (pz - z) / -dz
                         lev_out[i] = 0
                     continue
-                k = KK[c]
-                if k < 0:
-                    continue
                 b = BIN[c]
                 s = S[c]
+                ke = kend[b]
+                if ke == 0 or AZ[ke - 1, b, 0] < s:
+                    continue
+                k = _first_at_or_above(AZ, b, s, ke, kprev)
+                kprev = k
                 ux = UX[c]
                 uy = UY[c]
-                ke = kend[b]
                 # the crossing on the bin's centre azimuth, between samples k - 1 and k (where
                 # A first reaches s: g_(k-1) < 0 <= g_k), linear between them
                 d_hi = ds[k]

@@ -348,6 +348,7 @@ def expose(
     key: int,
     frame_index: int,
     radiance_scale: float = 1.0,
+    clamp_negative: bool = False,
 ) -> np.ndarray:
     """Simulate one raw frame from band radiance.
 
@@ -368,6 +369,9 @@ def expose(
         frame_index: frame counter (e.g. the capture step), in [-2**31, 2**31).
         radiance_scale: factor applied to ``radiance`` first (finite, > 0); the result is
             bit-identical to passing ``float64(radiance) * radiance_scale``.
+        clamp_negative: read negative radiance as 0 (a renderer's rounding below zero),
+            bit-identical to passing ``np.maximum(radiance, 0)`` without its copy; NaN
+            still fails.
 
     Returns:
         uint16 raw codes in [0, 2**adc_bits - 1] (left-shifted to the top bits when
@@ -406,6 +410,7 @@ def expose(
             _expose_kernel(
                 Lc,
                 float(radiance_scale),
+                0.0 if clamp_negative else -np.inf,
                 keys,
                 params.electrons_per_radiance * t,
                 params.dark_current_e_s * t,
@@ -420,7 +425,7 @@ def expose(
                 workers(),
             )
     if bad.any():
-        _raise_bad_input(L, radiance_scale, params, t)
+        _raise_bad_input(np.maximum(L, 0) if clamp_negative else L, radiance_scale, params, t)
     if L.ndim == 2:
         return out[0]
     return np.ascontiguousarray(np.moveaxis(out, 0, 2))
@@ -509,12 +514,14 @@ def _nb_normal(b):
 
 
 @numba.njit(cache=True)
-def _row_gauss(L, scale, hi, kz, rate, dark_e, lam_out, n_out):
+def _row_gauss(L, scale, lo, hi, kz, rate, dark_e, lam_out, n_out):
     """Pass 1: mean electrons and Gaussian draws; returns the count of invalid pixels
-    (radiance negative or not finite, or an electron mean that overflows)."""
+    (radiance negative or not finite, or an electron mean that overflows). Radiance
+    below ``lo`` is read as ``lo`` (0 or -inf; NaN passes, as through np.maximum)."""
     nvalid = 0
     for c in range(L.size):
-        x = np.float64(L[c]) * scale
+        v = np.float64(L[c])
+        x = (lo if v < lo else v) * scale
         lam = x * rate + dark_e
         nvalid += (x >= 0.0) & (x < np.inf) & (lam < np.inf)
         lam_out[c] = lam
@@ -588,10 +595,11 @@ def _row_adc(n_e, hi, kr, full_well, read_noise, conv, black, max_code, shift, o
 
 @numba.njit(parallel=True, cache=True, fastmath=False, nogil=True)
 def _expose_kernel(  # pragma: no cover - compiled
-    L, scale, keys, rate, dark_e, full_well, read_noise, conv, black, max_code, shift, out, bad,
-    nwork,
+    L, scale, lo, keys, rate, dark_e, full_well, read_noise, conv, black, max_code, shift, out,
+    bad, nwork,
 ):  # fmt: skip
-    """Raw codes for L (channels, rows, cols) into out; bad[r] counts invalid pixels. Rows
+    """Raw codes for L (channels, rows, cols) into out (radiance below ``lo`` read as
+    ``lo``); bad[r] counts invalid pixels. Rows
     go to ``nwork`` workers through a queue (:mod:`lunar_drake.render.row_queue`); every
     pixel's draws come from its own counters, so the output does not depend on which
     worker takes a row."""
@@ -619,7 +627,9 @@ def _expose_kernel(  # pragma: no cover - compiled
             hi = np.uint64(r) << np.uint64(32)
             nbad = 0
             for ch in range(nch):
-                nbad += _row_gauss(L[ch, r], scale, hi, keys[ch, 1], rate, dark_e, lam_row, n_row)
+                nbad += _row_gauss(
+                    L[ch, r], scale, lo, hi, keys[ch, 1], rate, dark_e, lam_row, n_row
+                )
                 m = 0
                 for c in range(cols):  # branch-free compaction
                     idx[m] = c
