@@ -367,13 +367,20 @@ def _renderers(hf, meshes, w=128, h=96):
     return out
 
 
-def test_engines_agree_on_a_bumpy_site_with_a_rover_and_its_shadow():
+def _box_scene():
+    """The bumpy site, a rover-sized box on it (its pose X_box) and a camera X looking at
+    it from 3.5 m."""
     hf = _bumpy()
     box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
     z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
     X_box = np.eye(4)
     X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
     X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    return hf, box, X_box, X
+
+
+def test_engines_agree_on_a_bumpy_site_with_a_rover_and_its_shadow():
+    hf, box, X_box, X = _box_scene()
     rs = _renderers(hf, [box])
     lm = RasterSampler.on_heightfield(
         np.linspace(0.6, 1.0, hf.shape[1], dtype=np.float32)[None, :].repeat(hf.shape[0], 0),
@@ -450,12 +457,7 @@ def test_frames_are_bit_identical_whatever_the_thread_count():
     # thread renders a row must not change a byte, rover shadow candidates included
     import numba
 
-    hf = _bumpy()
-    box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
-    z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
-    X_box = np.eye(4)
-    X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
-    X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    hf, box, X_box, X = _box_scene()
     r = _renderers(hf, [box], w=160, h=120)["heightfield"]
     lm = RasterSampler.on_heightfield(
         np.linspace(0.6, 1.0, hf.shape[1], dtype=np.float32)[None, :].repeat(hf.shape[0], 0),
@@ -554,12 +556,7 @@ def test_a_terrain_pixel_does_not_depend_on_the_rest_of_its_row():
     # the kernel shades a row's terrain pixels as one run of columns when they are
     # contiguous and compacts them otherwise: rows that the rover splits take the second
     # path; their terrain pixels must come out as in the same frame without the rover
-    hf = _bumpy()
-    box = _box([0.0, 0.0, 0.0], [0.5, 0.4, 0.3])
-    z = float(hf.height(np.array([-2.0]), np.array([0.0]))[0])
-    X_box = np.eye(4)
-    X_box[:3, 3] = [-2.0, 0.0, z + 0.45]
-    X = _pose([-5.5, 0.8, z + 1.6], tilt_deg=18.0, yaw_deg=-8.0)
+    hf, box, X_box, X = _box_scene()
     sun = (-0.9, 0.1, 0.4)  # the box's shadow falls behind it, out of view
     lm = RasterSampler.on_heightfield(np.full(hf.shape, 0.9, np.float32), hf, outside=1.0)
     out = []
