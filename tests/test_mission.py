@@ -186,3 +186,32 @@ def test_default_rover_drives_100_m_over_the_default_site(cache):
     # (2 when consistent; 0.46 with the earlier, 4x too wide slip sigma; 2.7 measured)
     assert 0.5 < summary["localization"]["position_nees"]["mean"] < 4.0
     assert summary["hazards"]["strikes"] == 0 and summary["modes"]["safings"] == {}
+
+
+def test_the_logged_ports_are_recorded_each_as_itself(small_site):
+    """``build_mission`` logs every port of ``LOGGED_PORTS`` the mission has through one
+    sink; ``collect_logs`` hands each port back with its own columns: at the run's last
+    sample (the end time is a logging instant) they are the port's own value."""
+    import dataclasses as dc
+
+    from lunar_drake.simulation import LOGGED_PORTS, build_mission, collect_logs, run_mission
+
+    scenario, site = small_site
+    scenario = dc.replace(
+        scenario,
+        simulation_duration=0.5,
+        sensors=dc.replace(
+            scenario.sensors, camera=dc.replace(scenario.sensors.camera, enabled=False)
+        ),
+    )
+    run = build_mission(scenario=scenario, site=site)
+    logs = collect_logs(run, stop_reason=run_mission(run))
+    mctx = run.mission.GetMyContextFromRoot(run.simulator.get_context())
+    names = [n for n in LOGGED_PORTS if run.mission.HasOutputPort(n)]
+    assert sorted(logs.vectors) == sorted(names) and len(names) >= 14
+    n = round(0.5 / scenario.logging.period_s) + 1
+    for name in names:
+        v = logs.vectors[name]
+        assert v.data.shape == (n, len(LOGGED_PORTS[name])), name
+        np.testing.assert_array_equal(v.times, logs.vectors["truth.pose"].times)
+        np.testing.assert_array_equal(v.data[-1], run.mission.GetOutputPort(name).Eval(mctx))
