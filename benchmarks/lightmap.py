@@ -29,6 +29,11 @@ import time
 
 from lunar_drake.files import atomic_write_text, check_output_file
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def make_dem(size: int, res: float, seed: int, factor: int = 128):
     import numpy as np
@@ -177,6 +182,7 @@ def main(argv=None) -> int:
         f"{c['abs_diff_mean']:.4f}, max {c['abs_diff_max']:.3f} "
         f"(penumbra cells {c['partial_fraction_bruteforce']:.1%})"
     )
+    record_speed_index(result)
     if args.out:
         atomic_write_text(args.out, json.dumps(result, indent=2), what="results JSON")
     return 0

@@ -31,6 +31,11 @@ import numpy as np
 
 from lunar_drake.files import atomic_write_text, check_output_file
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def trust_table(*, orbital, truth, bin_deg: float = 2.0) -> list[dict]:
     """Rows per orbital-slope bin: how much of each free orbital cell truth calls lethal.
@@ -136,6 +141,7 @@ def main(argv=None) -> int:
           f"{pct['unconfirmed_fraction']:.1f} % unconfirmed; blocked after inflation: "
           f"{pct['blocked_fraction']:.1f} % ({pct['blocked_trusting_fraction']:.1f} % "
           "trusting the orbital map)")  # fmt: skip
+    record_speed_index(result)
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")
     return 0

@@ -28,6 +28,11 @@ from lunar_drake.files import atomic_write_text, check_output_file
 from lunar_drake.render import hapke as hk
 from lunar_drake.render import sensor as sn
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 H, W = 960, 1280
 
 
@@ -122,6 +127,7 @@ def main(argv=None) -> int:
         print(f"{r['case']:<16} {r['dtype']:<8} {r['workers']:>7} {r['ms']:>8.1f}")
     if a.out:
         result = {"width": W, "height": H, "repeat": a.repeat, "rows": rows}
+        record_speed_index(result)
         atomic_write_text(a.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 

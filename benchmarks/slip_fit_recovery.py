@@ -39,6 +39,11 @@ from lunar_drake.models.rover_description import rover_preset
 from lunar_drake.studies.slip_fit import ROVER_CHOICES, run_slip_fit
 from lunar_drake.studies.slip_study import run_slip_study
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -159,6 +164,7 @@ def main(argv=None) -> int:
             "table": table,
             "worst_sim_minus_generating_pp": worst,
         }
+        record_speed_index(result)
         atomic_write_text(a.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 

@@ -57,3 +57,14 @@ def speed_index_line(result: dict) -> str:
     if s is None:
         return f"speed index: not measured ({result.get('error', 'unknown')})"
     return f"speed index: {s:.3f} s (lower is faster; {result['script']})"
+
+
+def record_speed_index(result: dict) -> dict:
+    """Measures the speed index (after a benchmark's timed work, so it disturbs none of
+    it), prints its line and adds ``speed_index_s`` and ``speed_index`` (the whole
+    measurement) to ``result``, a benchmark's JSON document; returns ``result``."""
+    speed = measure_speed_index()
+    print(speed_index_line(speed))
+    result["speed_index_s"] = speed["speed_index_s"]
+    result["speed_index"] = speed
+    return result

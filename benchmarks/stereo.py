@@ -34,6 +34,11 @@ import numpy as np
 
 from lunar_drake.files import atomic_write_text, check_output_file
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def render_pair(scenario, site, *, yaw_deg: float, forward_m: float = 0.0):
     """(left raw, right raw, left true depth, left preview, X_WC of the left camera
@@ -138,6 +143,7 @@ def main(argv=None) -> int:
             f"{name}: median error {out[name]['median_abs_error_pct']:.2f} % of depth, "
             f"valid fraction {out[name]['valid_fraction']:.3f}"
         )
+    record_speed_index(out)
     if a.out:
         atomic_write_text(a.out, json.dumps(out, indent=2) + "\n", what="results JSON")
     return 0

@@ -26,6 +26,11 @@ import psutil
 
 from lunar_drake.files import atomic_write_text, check_output_file
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 class PeakRSS:
     """Samples this process's resident set size in a thread; ``peak`` in bytes."""
@@ -156,6 +161,7 @@ def main(argv=None) -> int:
         print(f"{name:<{w}}  {val:>32}  {goal}")
     st = runs[-1]["stage_s"]
     print("stages (s): " + ", ".join(f"{k} {v:.1f}" for k, v in st.items()))
+    record_speed_index(result)
     if args.out:
         atomic_write_text(args.out, json.dumps(result, indent=2) + "\n", what="results JSON")
     return 0

@@ -31,6 +31,11 @@ from lunar_drake.dynamics.wheel_reference import reference_slip
 from lunar_drake.files import atomic_write_text, check_output_file
 from lunar_drake.moon import GRAVITY_MPS2
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def _time(fn, calls: int) -> dict:
     for _ in range(min(calls, 200)):
@@ -100,6 +105,7 @@ def main(argv=None) -> int:
             "processor": platform.processor(),
             "results": rows,
         }
+        record_speed_index(result)
         atomic_write_text(a.out, json.dumps(result, indent=2), what="results JSON")
     return 0
 

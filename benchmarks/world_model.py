@@ -30,6 +30,11 @@ from pathlib import Path
 
 from lunar_drake.files import atomic_write_text, check_output_file
 
+try:
+    from benchmarks.speed_index import record_speed_index
+except ImportError:  # run as a script: benchmarks/ itself is on sys.path
+    from speed_index import record_speed_index
+
 
 def site_for(size: int, resolution_m: float, seed: int, cache: Path) -> Path:
     """A synthesized site directory (built once per size/resolution/seed, in a child
@@ -113,6 +118,7 @@ def main(argv=None) -> int:
           f"{doc['peak_rss_mb']:>9.0f} {100 * doc['psr_fraction']:>7.2f}")  # fmt: skip
     for stage, sec in doc["stage_seconds"].items():
         print(f"  {stage:<40} {sec:>7.1f} s")
+    record_speed_index(doc)
     if args.out:
         atomic_write_text(args.out, json.dumps(doc, indent=2) + "\n")
     return 0
