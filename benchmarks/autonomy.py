@@ -14,8 +14,10 @@ and replanning; with ``--no-stereo`` -- the default with ``--map truth`` -- came
 time for three times the straight-line distance at the drive speed plus two minutes,
 ending 20 s after the ground has judged the goal reached or failed),
 written as a run directory under ``--runs``. JSON: ``goals, reached, hazard_strikes,
-mean_drift_pct, mean_position_nees, rtt_s, map`` and ``runs`` (``goal_xy, reached,
-strikes, final_error_m, distance_m, drift_pct, position_nees, run_dir``; a goal the
+mean_drift_pct, mean_position_nees, rtt_s, map, slip_calibration`` (the flight's
+pre-flight calibrations; ``calibration_is_plant_soil`` true if any was the plant's soil,
+an oracle) and ``runs`` (``goal_xy, reached, strikes, final_error_m, distance_m,
+drift_pct, position_nees, slip_calibration, run_dir``; a goal the
 ground could not plan to on its map is ``reached: false`` with ``error``).
 ``position_nees``: the on-board EKF's horizontal position NEES over the run, its mean
 (2 for a consistent filter; ``metrics.position_nees``), scored on truth;
@@ -108,6 +110,7 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str 
     (g,) = summary["goals"]
     loc = summary["localization"]
     moved = summary["rover"]["distance_m"]
+    cal = summary["flight"]["slip_calibration"]
     up = [r for r in logs.link if r.direction == "uplink" and math.isfinite(r.t_received)]
     down = [r for r in logs.link if r.direction == "downlink" and math.isfinite(r.t_received)]
     rtt = (np.mean([r.t_received - r.t_sent for r in up]) if up else math.nan) + (
@@ -124,6 +127,9 @@ def run_goal(scenario_name: str, goal, map_source: str, run_dir: str, text: str 
         "safings": sum(summary["modes"]["safings"].values()),
         "replans": summary["ground"]["replans"],
         "rtt_s": float(rtt),
+        # the flight's pre-flight slip calibration (soil, and whether it is the plant's)
+        "slip_calibration": cal.get("slip_calibration"),
+        "calibration_is_plant_soil": cal.get("is_plant_soil"),
     }
 
 
@@ -185,6 +191,9 @@ def main(argv=None) -> int:
         "safings": sum(r.get("safings", 0) for r in rows),
         "map": a.map,
         "stereo": a.stereo,
+        "slip_calibration": sorted({str(r["slip_calibration"]) for r in rows
+                                    if "slip_calibration" in r}),
+        "calibration_is_plant_soil": any(r.get("calibration_is_plant_soil") for r in rows),
         "scenario": a.scenario,
         "scenario_text": a.scenario_text,
         "runs": rows,
@@ -213,6 +222,9 @@ def main(argv=None) -> int:
         f"mean position NEES {result['mean_position_nees']} (2: consistent), "
         f"rtt {result['rtt_s']} s ({a.map} map)"
     )
+    oracle = result["calibration_is_plant_soil"]
+    print(f"slip calibration {', '.join(result['slip_calibration']) or '-'} "
+          f"({'the plant soil: an oracle' if oracle else 'not the plant soil'})")  # fmt: skip
     print(speed_index_line(speed))
     if a.out:
         atomic_write_text(a.out, json.dumps(result, indent=2) + "\n", what="results JSON")

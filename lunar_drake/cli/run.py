@@ -10,11 +10,12 @@ from lunar_drake.cli._common import add_subcommand, plural, split_scenario
 from lunar_drake.errors import ConfigError, check_range
 
 #: Simulated seconds per wall second on a 2-core machine (low, high), with the stereo
-#: cameras and without: the range of `benchmarks/mission_rate.py` and whole default
-#: missions measured here (2026-11-29: whole default runs 4.2-4.9x alone, without
-#: cameras 9.8x; the low ends for a machine shared with another job). Only for the
+#: cameras and without: the range of whole default missions measured here
+#: (`lunar-drake run`; with cameras 4.2-4.9x alone on 2026-11-29, a slow day, and
+#: 7.9-8.8x on 2026-12-01, one core busy with another job or not; without cameras 8.2-11.5x
+#: and 22.0-23.5x; the low end for a slow day shared with another job). Only for the
 #: estimate printed before a run.
-REALTIME_FACTOR = {"cameras": (2.5, 4.5), "no_cameras": (5.0, 9.0)}
+REALTIME_FACTOR = {"cameras": (2.5, 8.5), "no_cameras": (8.0, 23.0)}
 #: Bytes per pixel of one camera's saved frame (16-bit raw PNG + 8-bit preview PNG of
 #: the noisy 12-bit codes): 1.5-1.9 measured on default-site frames at 640 x 480.
 FRAME_BYTES_PER_PX = 1.7
