@@ -260,10 +260,12 @@ def test_servo_gains_place_the_bandwidth():
 
 
 @pytest.mark.parametrize("offset", [0.0, 0.07])
-def test_one_twist_compiled_path_gives_the_batch_bits(offset):
+def test_one_twist_compiled_path_agrees_with_the_batch_path(offset):
     """A single twist (the flight software's call) goes through one compiled call; it
-    gives the batch path's bits: angles, speeds, saturation and needed angles, sideways
-    and standing twists and clipped wheels included."""
+    gives the batch path's results: saturation to the bit, angles, speeds and needed
+    angles to 1e-13 relative, sideways and standing twists and clipped wheels included. (The
+    compiled call uses libm's atan2 and hypot; numpy's vector loops on an AVX-512 machine
+    use their own SIMD forms, 1 ulp apart from libm's in ~8 % of random atan2 calls.)"""
     g = _geom(offset, steering_limit=math.radians(70))
     rng = np.random.default_rng(11)
     special = [[0.0, 0.3, 0.0], [0.0, -0.3, 0.0], [0.0, 0.0, 0.0], [1e-12, 0.0, 0.0],
@@ -273,8 +275,10 @@ def test_one_twist_compiled_path_gives_the_batch_bits(offset):
         prev = rng.uniform(-1.2, 1.2, 4) if k % 3 else None
         one = explicit_steer_commands(t, geometry=g, previous_delta=prev, clip=True)
         batch = explicit_steer_commands(t[None], geometry=g, previous_delta=prev, clip=True)
-        for name in ("delta", "omega", "saturated", "needed_delta"):
-            np.testing.assert_array_equal(getattr(one, name), getattr(batch, name)[0], name)
+        np.testing.assert_array_equal(one.saturated, batch.saturated[0])
+        for name in ("delta", "omega", "needed_delta"):
+            np.testing.assert_allclose(getattr(one, name), getattr(batch, name)[0],
+                                       rtol=1e-13, atol=1e-15, err_msg=name)  # fmt: skip
     assert explicit_steer_commands([0.05, 0.3, 0.0], geometry=g, clip=True).saturated.any()
     with pytest.raises(SteeringLimitError):  # without clip the batch path's error
         explicit_steer_commands([0.05, 0.3, 0.0], geometry=g)
